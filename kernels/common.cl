@@ -1,0 +1,50 @@
+// Shared helpers, prefixed to every lfcl program.
+//
+// Layout (docs/layout.md): a light field lives in three colour planes shaped like
+// the sensor, plane[c][row][col] with row = s*U + u, col = t*V + v.
+
+// Colour (0=R, 1=G, 2=B) of sensor pixel (row, col). `pattern` packs the 2x2 Bayer
+// cell, 2 bits per entry, entry index 2*(row&1) + (col&1); the host folds the
+// crop origin's parity into it, so the colour always follows sensor coordinates.
+inline int bayer_colour(int row, int col, int pattern)
+{
+    return (pattern >> (2 * (((row & 1) << 1) | (col & 1)))) & 3;
+}
+
+// Steps of the 4D grid on the sensor-shaped planes (row = s*U + u, col = t*V + v,
+// W = T*V): u: W, v: 1, s: U*W, t: V. Dims are bits of a mask (u=1, v=2, s=4, t=8).
+#define DIM_U 1
+#define DIM_V 2
+#define DIM_S 4
+#define DIM_T 8
+
+// Is there a next sample along dim d from (row, col)?
+inline int has_next(int d, int row, int col, int height, int width, int U, int V)
+{
+    switch (d) {
+    case DIM_U: return (row % U) < U - 1;
+    case DIM_V: return (col % V) < V - 1;
+    case DIM_S: return row / U < height / U - 1;
+    default:    return col / V < width / V - 1;
+    }
+}
+
+inline int has_prev(int d, int row, int col, int U, int V)
+{
+    switch (d) {
+    case DIM_U: return (row % U) > 0;
+    case DIM_V: return (col % V) > 0;
+    case DIM_S: return row >= U;
+    default:    return col >= V;
+    }
+}
+
+inline size_t step_of(int d, int width, int U, int V)
+{
+    switch (d) {
+    case DIM_U: return (size_t)width;
+    case DIM_V: return 1;
+    case DIM_S: return (size_t)U * width;
+    default:    return (size_t)V;
+    }
+}

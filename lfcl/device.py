@@ -1,0 +1,183 @@
+"""The one place that finds OpenCL devices, builds programs and caches kernels.
+
+Nothing else in lfcl creates contexts or queues. A :class:`Runtime` wraps one
+device: its context, one in-order queue, the programs built from ``kernels/*.cl``
+(each built once per context) and the kernel objects fetched from them (each
+fetched once).
+
+Device choice, in order: an explicit ``spec`` argument (the CLI's ``--device``),
+the ``LFCL_DEVICE`` environment variable, then the first device found. A spec is
+either an index into :func:`list_devices` or a case-insensitive substring of the
+device or platform name.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.resources
+import os
+import threading
+
+import numpy as np
+import pyopencl as cl
+
+INSTALL_HINT = (
+    "No OpenCL platform was found. lfcl needs an OpenCL runtime: on Debian/Ubuntu "
+    "install the CPU runtime with `sudo apt-get install pocl-opencl-icd` (or your GPU "
+    "vendor's OpenCL ICD), then check with `lfcl devices`."
+)
+
+# Every program is prefixed with common.cl (Bayer colour lookup, index helpers).
+_COMMON_SOURCE = "common"
+
+
+class DeviceError(RuntimeError):
+    """No usable OpenCL device, or the requested one does not exist."""
+
+
+@dataclasses.dataclass(frozen=True)
+class DeviceInfo:
+    index: int
+    platform: str
+    name: str
+    type: str
+    compute_units: int
+    global_mem_mib: int
+    max_alloc_mib: int
+    max_work_group_size: int
+    opencl_version: str
+
+    def describe(self) -> str:
+        return (
+            f"[{self.index}] {self.name} ({self.type}) on {self.platform}: "
+            f"{self.compute_units} compute units, {self.global_mem_mib} MiB global memory, "
+            f"{self.max_alloc_mib} MiB max allocation, work-group <= {self.max_work_group_size}, "
+            f"{self.opencl_version}"
+        )
+
+
+def _all_devices() -> list[cl.Device]:
+    try:
+        platforms = cl.get_platforms()
+    except cl.LogicError as exc:  # pyopencl raises this when the ICD loader finds nothing
+        raise DeviceError(INSTALL_HINT) from exc
+    devices = [d for p in platforms for d in p.get_devices()]
+    if not devices:
+        raise DeviceError(INSTALL_HINT)
+    return devices
+
+
+def list_devices() -> list[DeviceInfo]:
+    """Every OpenCL device of every platform, with its key limits."""
+    return [
+        DeviceInfo(
+            index=i,
+            platform=d.platform.name.strip(),
+            name=d.name.strip(),
+            type=cl.device_type.to_string(d.type),
+            compute_units=d.max_compute_units,
+            global_mem_mib=d.global_mem_size // 2**20,
+            max_alloc_mib=d.max_mem_alloc_size // 2**20,
+            max_work_group_size=d.max_work_group_size,
+            opencl_version=d.version.strip(),
+        )
+        for i, d in enumerate(_all_devices())
+    ]
+
+
+def select_device(spec: str | int | None = None) -> cl.Device:
+    """The device named by ``spec`` (or ``LFCL_DEVICE``), else the first one."""
+    devices = _all_devices()
+    if spec is None or spec == "":
+        spec = os.environ.get("LFCL_DEVICE", "")
+    spec = str(spec).strip()
+    if spec == "":
+        return devices[0]
+    if spec.isdigit():
+        index = int(spec)
+        if index >= len(devices):
+            raise DeviceError(
+                f"device index {index} does not exist: {len(devices)} device(s) found (see `lfcl devices`)"
+            )
+        return devices[index]
+    matches = [
+        d for d in devices if spec.lower() in d.name.lower() or spec.lower() in d.platform.name.lower()
+    ]
+    if not matches:
+        raise DeviceError(f"no OpenCL device matches {spec!r} (see `lfcl devices`)")
+    return matches[0]
+
+
+def kernel_source(name: str) -> str:
+    """The OpenCL C source ``kernels/<name>.cl`` from the installed package."""
+    return importlib.resources.files("lfcl.kernels").joinpath(f"{name}.cl").read_text()
+
+
+class Runtime:
+    """One device: context, queue, and the programs and kernels built for it."""
+
+    def __init__(self, device: cl.Device):
+        self.device = device
+        self.context = cl.Context([device])
+        self.queue = cl.CommandQueue(self.context)
+        self._programs: dict[str, cl.Program] = {}
+        self._kernels: dict[tuple[str, str], cl.Kernel] = {}
+        self._lock = threading.Lock()
+
+    @property
+    def name(self) -> str:
+        return self.device.name.strip()
+
+    def program(self, name: str) -> cl.Program:
+        """``kernels/<name>.cl`` (after common.cl), built once for this context."""
+        with self._lock:
+            program = self._programs.get(name)
+            if program is None:
+                source = kernel_source(_COMMON_SOURCE) + "\n" + kernel_source(name)
+                program = cl.Program(self.context, source).build(options=["-cl-std=CL1.2"])
+                self._programs[name] = program
+            return program
+
+    def kernel(self, program: str, kernel: str) -> cl.Kernel:
+        """The kernel object ``kernel`` of ``program``, fetched once and reused."""
+        key = (program, kernel)
+        cached = self._kernels.get(key)
+        if cached is None:
+            cached = getattr(self.program(program), kernel)
+            self._kernels[key] = cached
+        return cached
+
+    def launch(self, program: str, kernel: str, global_size, *args, local_size=None) -> cl.Event:
+        """Enqueue a kernel over ``global_size`` work-items (the kernels bound-check)."""
+        return self.kernel(program, kernel)(self.queue, tuple(global_size), local_size, *args)
+
+    def empty(self, shape, dtype=np.float32):
+        import pyopencl.array as cla
+
+        return cla.empty(self.queue, shape, dtype)
+
+    def zeros(self, shape, dtype=np.float32):
+        import pyopencl.array as cla
+
+        return cla.zeros(self.queue, shape, dtype)
+
+    def to_device(self, array: np.ndarray):
+        import pyopencl.array as cla
+
+        return cla.to_device(self.queue, np.ascontiguousarray(array))
+
+
+_runtimes: dict[str, Runtime] = {}
+_runtimes_lock = threading.Lock()
+
+
+def get_runtime(spec: str | int | None = None) -> Runtime:
+    """The shared :class:`Runtime` of the chosen device (created on first use)."""
+    device = select_device(spec)
+    key = f"{device.platform.name}/{device.name}/{device.int_ptr}"
+    with _runtimes_lock:
+        runtime = _runtimes.get(key)
+        if runtime is None:
+            runtime = Runtime(device)
+            _runtimes[key] = runtime
+        return runtime

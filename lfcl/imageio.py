@@ -1,0 +1,103 @@
+"""Image files in and out, through OpenImageIO; every write is atomic.
+
+Writers go to a temporary file in the destination folder and rename it into
+place, so a failed or interrupted run never leaves a half-written output.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+
+class ImageReadError(ValueError):
+    """A file that OpenImageIO cannot read as an image."""
+
+
+@contextlib.contextmanager
+def atomic_path(path, suffix: str | None = None):
+    """Yield a temporary path beside ``path``; rename it onto ``path`` on success."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=suffix or path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def read_image(path) -> np.ndarray:
+    """Any image OpenImageIO reads, as float32 ``(H, W, C)``."""
+    buf = oiio.ImageBuf(str(path))
+    if buf.has_error:
+        raise ImageReadError(f"cannot read image {path}: {buf.geterror().strip()}")
+    pixels = buf.get_pixels(oiio.FLOAT)
+    if buf.has_error or pixels is None:
+        raise ImageReadError(f"cannot read image {path}: {buf.geterror().strip()}")
+    pixels = np.asarray(pixels, dtype=np.float32)
+    if pixels.ndim == 2:
+        pixels = pixels[:, :, None]
+    return pixels
+
+
+_FORMATS = {".exr": oiio.FLOAT, ".tif": oiio.UINT16, ".tiff": oiio.UINT16, ".png": oiio.UINT8}
+
+
+def write_image(path, image: np.ndarray, metadata: dict | None = None, *, pixel_format=None) -> Path:
+    """Write ``(H, W[, C])`` float data atomically.
+
+    EXR keeps float32 values as they are (scene-linear, unclipped); TIFF is
+    16-bit and PNG 8-bit, both clipped to [0, 1] by OpenImageIO's conversion.
+    ``metadata`` goes into the file's header as ``lfcl:<key>`` attributes
+    (non-string values as JSON).
+    """
+    path = Path(path)
+    fmt = pixel_format if pixel_format is not None else _FORMATS.get(path.suffix.lower())
+    if fmt is None:
+        raise ValueError(f"unsupported output extension {path.suffix!r}: use .exr, .tif, .tiff or .png")
+    image = np.asarray(image, dtype=np.float32)
+    if image.ndim == 2:
+        image = image[:, :, None]
+    if image.ndim != 3:
+        raise ValueError(f"an image must have shape (H, W) or (H, W, C), got {image.shape}")
+    if not np.all(np.isfinite(image)):
+        raise ValueError(f"refusing to write {path.name}: the image holds NaN or Inf values")
+    height, width, channels = image.shape
+    spec = oiio.ImageSpec(width, height, channels, fmt)
+    if path.suffix.lower() == ".exr":
+        spec.attribute("compression", "zip")
+    for key, value in (metadata or {}).items():
+        spec.attribute(f"lfcl:{key}", value if isinstance(value, str) else json.dumps(value))
+    with atomic_path(path) as tmp:
+        out = oiio.ImageOutput.create(str(tmp))
+        if out is None or not out.open(str(tmp), spec):
+            raise OSError(f"cannot write {path}: {oiio.geterror().strip()}")
+        ok = out.write_image(np.ascontiguousarray(image))
+        out.close()
+        if not ok:
+            raise OSError(f"cannot write {path}: {out.geterror().strip()}")
+    return path
+
+
+def write_json(path, data) -> Path:
+    """Write ``data`` as indented JSON, atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=2, sort_keys=False) + "\n")
+    return Path(path)
+
+
+def write_npy(path, array: np.ndarray) -> Path:
+    """Write a ``.npy`` atomically."""
+    with atomic_path(path, suffix=".npy") as tmp:
+        np.save(tmp, array)
+    return Path(path)

@@ -1,0 +1,120 @@
+"""The demosaic/denoise methods and their defaults: one place for both.
+
+``malvar``     2D Malvar-He-Cutler on the whole lenslet mosaic (the paper's baseline).
+``admm-uv``    ADMM-TV with the prior over (u, v): within each microlens.
+``admm-st``    ADMM-TV over (s, t): across microlenses, within each view.
+``admm-uvst``  ADMM-TV over all four dims.
+
+Every ADMM method starts from the Malvar result. Its defaults follow the noise
+level ``sigma`` (rms noise per raw pixel, normalised units) estimated from the raw
+(lfcl/noise.py): ``lam = lam_per_sigma * sigma`` and, for the early-stopped
+methods, stop when ``rms(x_k - x_{k-1}) <= change_per_sigma * sigma``. The
+numbers come from the sweep documented in docs/admm.md. ``strength`` multiplies
+lam for scenes that want more or less smoothing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from .device import get_runtime
+from .noise import NoiseEstimate, estimate_noise
+from .ops.malvar import Malvar
+from .solvers.admm import AdmmSolver
+from .solvers.params import AdmmParams
+
+METHODS = ("malvar", "admm-uv", "admm-st", "admm-uvst")
+
+
+@dataclasses.dataclass(frozen=True)
+class AdmmDefaults:
+    """How an ADMM method's parameters follow the noise level."""
+
+    dims: str
+    lam_per_sigma: float
+    change_per_sigma: float  # 0: no early stop on the change of x
+    max_iter: int
+    rho: float = 0.3
+    cg_steps: int = 4
+
+
+ADMM_DEFAULTS = {
+    "admm-uv": AdmmDefaults(dims="uv", lam_per_sigma=0.12, change_per_sigma=0.13, max_iter=60),
+    "admm-st": AdmmDefaults(dims="st", lam_per_sigma=0.03, change_per_sigma=0.0, max_iter=15),
+    "admm-uvst": AdmmDefaults(dims="uvst", lam_per_sigma=0.014, change_per_sigma=0.0, max_iter=30),
+}
+
+
+def parse_method(method: str) -> str:
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}: expected one of {', '.join(METHODS)}")
+    return method
+
+
+def admm_params(method: str, sigma: float, *, lam=None, iterations=None, rho=None, strength=1.0) -> AdmmParams:
+    """The parameters ``method`` uses at noise level ``sigma`` (explicit values win)."""
+    d = ADMM_DEFAULTS[parse_method(method)]
+    if not (strength > 0):
+        raise ValueError(f"strength must be > 0, got {strength!r}")
+    sigma = max(float(sigma), 1e-6)
+    return AdmmParams(
+        lam=float(lam) if lam is not None else strength * d.lam_per_sigma * sigma,
+        rho=float(rho) if rho is not None else d.rho,
+        max_iter=int(iterations) if iterations is not None else d.max_iter,
+        cg_steps=d.cg_steps,
+        # an explicit iteration count means "run that many"
+        change_tol=d.change_per_sigma * sigma if iterations is None else 0.0,
+    )
+
+
+@dataclasses.dataclass
+class DemosaicResult:
+    planes: np.ndarray  # [3, H, W] float32, docs/layout.md
+    method: str
+    parameters: dict
+    iterations: int
+    seconds: float
+    stop_reason: str
+    history: list
+    noise: NoiseEstimate | None
+
+
+def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
+                        lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
+                        device=None, callback=None) -> DemosaicResult:
+    """Demosaic (and denoise) a normalised lenslet mosaic [H, W] into [3, H, W] planes.
+
+    H and W must be whole multiples of the pitch (crop first). ``noise`` defaults to
+    an estimate from the mosaic (used by the ADMM methods only).
+    """
+    method = parse_method(method)
+    mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
+    if mosaic.ndim != 2:
+        raise ValueError(f"mosaic must be 2D [H, W], got shape {mosaic.shape}")
+    U, V = pitch
+    if mosaic.shape[0] % U or mosaic.shape[1] % V:
+        raise ValueError(f"mosaic {mosaic.shape[0]}x{mosaic.shape[1]} is not a whole number of {U}x{V} lenses")
+    if not np.all(np.isfinite(mosaic)):
+        raise ValueError("mosaic holds NaN or Inf values")
+    runtime = get_runtime(device)
+    start = time.perf_counter()
+    b = runtime.to_device(mosaic)
+    x0 = Malvar(runtime, mosaic.shape, pattern, origin).forward(b)
+    if method == "malvar":
+        planes = x0.get()
+        return DemosaicResult(planes, method, {}, 0, time.perf_counter() - start, "direct", [], None)
+    if noise is None:
+        noise = estimate_noise(mosaic, pattern, pitch, origin)
+    params = admm_params(method, noise.sigma, lam=lam, iterations=iterations, rho=rho, strength=strength)
+    solver = AdmmSolver(runtime, mosaic.shape, pattern, pitch, ADMM_DEFAULTS[method].dims, origin)
+    result = solver.solve(b, x0, params, callback=callback)
+    planes = result.x.get()
+    if not np.all(np.isfinite(planes)):
+        raise FloatingPointError(f"{method} produced NaN/Inf values; try a smaller lambda or rho")
+    return DemosaicResult(
+        planes, method, dataclasses.asdict(params), result.iterations, time.perf_counter() - start,
+        result.stop_reason, [dataclasses.asdict(r) for r in result.history], noise,
+    )

@@ -1,0 +1,159 @@
+"""Malvar-He-Cutler linear demosaicing of a Bayer mosaic.
+
+H. S. Malvar, L. He, R. Cutler, "High-quality linear interpolation for
+demosaicing of Bayer-patterned color images", Proc. IEEE ICASSP 2004, vol. 3,
+pp. 485-488. Each missing colour is a 5x5 linear filter of the mosaic (a bilinear
+estimate plus a gain times the Laplacian of the colour measured at the pixel);
+the four filter kinds are G at R/B, R/B at G with the sought colour left/right,
+R/B at G with it above/below, and R at B / B at R. Measured samples are kept
+as they are and nothing is clipped.
+
+The formulas are those of colour-demosaicing's ``demosaicing_CFA_Bayer_Malvar2004``;
+the border differs: the mosaic is extended by *mirror* reflection about the edge
+sample without repeating it (index -1 -> 1, -2 -> 2, n -> n-2, n+1 -> n-3: numpy
+``np.pad(mode="reflect")``, scipy.ndimage ``mode="mirror"``). The extension is
+periodic with period 2(n-1), so every extended sample keeps its true CFA colour;
+colour-demosaicing's scipy ``mode="reflect"`` repeats the edge sample and breaks
+the CFA parity at the border. Tiny images: along an axis of 2 pixels the fold
+repeats (-2 -> 0, 3 -> 1); along an axis of 1 pixel every index maps to 0 (the
+filters are then applied to that constant extension as they are). The numpy twin
+:func:`malvar_np` and the kernel ``kernels/malvar.cl`` follow the same rule.
+
+Layouts: the mosaic is ``[H, W]``; the device class returns planes ``[3, H, W]``
+(docs/layout.md); the public :func:`malvar` returns ``(H, W, 3)``.
+
+Example::
+
+    >>> import numpy as np
+    >>> from lfcl.ops.malvar import malvar_np
+    >>> planes = malvar_np(np.full((4, 6), 0.5, np.float32), "GRBG")
+    >>> planes.shape, planes.dtype
+    ((3, 4, 6), dtype('float32'))
+    >>> bool(np.allclose(planes, 0.5))  # a flat grey mosaic stays flat grey
+    True
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..layout import packed_pattern, parse_pattern, pattern_channels
+from . import check_device_array, output
+
+
+def mirror_index(index, n: int):
+    """Mirror (numpy ``'reflect'``) extension: index into ``[0, n)``, period ``2(n-1)``."""
+    index = np.asarray(index)
+    if n <= 1:
+        return np.zeros_like(index)
+    period = 2 * (n - 1)
+    m = np.mod(index, period)
+    return np.where(m < n, m, period - m)
+
+
+def _check_mosaic(mosaic: np.ndarray, name: str = "mosaic"):
+    if mosaic.ndim != 2:
+        raise ValueError(f"{name} must have shape [H, W], got {mosaic.shape}")
+
+
+def malvar_np(mosaic: np.ndarray, pattern: str, origin=(0, 0)) -> np.ndarray:
+    """Malvar-He-Cutler demosaic: ``[H, W]`` mosaic -> ``[3, H, W]`` float32 planes.
+
+    Computed in float64 with the mirror border of the module docstring.
+    """
+    mosaic = np.asarray(mosaic)
+    _check_mosaic(mosaic)
+    pattern = parse_pattern(pattern)
+    H, W = mosaic.shape
+    # np.pad 'reflect' folds repeatedly for pads wider than the axis and repeats a
+    # singleton axis: exactly mirror_index (and the kernel's mirror_index).
+    padded = np.pad(mosaic.astype(np.float64), 2, mode="reflect")
+
+    def at(dr, dc):
+        return padded[2 + dr : 2 + dr + H, 2 + dc : 2 + dc + W]
+
+    C = at(0, 0)
+    N1, S1, W1, E1 = at(-1, 0), at(1, 0), at(0, -1), at(0, 1)
+    N2, S2, W2, E2 = at(-2, 0), at(2, 0), at(0, -2), at(0, 2)
+    D = at(-1, -1) + at(-1, 1) + at(1, -1) + at(1, 1)
+
+    # The four filter kinds of the paper (coefficients / 8).
+    g_at_rb = (4 * C + 2 * (N1 + S1 + W1 + E1) - (N2 + S2 + W2 + E2)) / 8
+    rb_at_g_horizontal = (5 * C + 4 * (W1 + E1) - (W2 + E2) - D + 0.5 * (N2 + S2)) / 8
+    rb_at_g_vertical = (5 * C + 4 * (N1 + S1) - (N2 + S2) - D + 0.5 * (W2 + E2)) / 8
+    rb_at_br = (6 * C + 2 * D - 1.5 * (N2 + S2 + W2 + E2)) / 8
+
+    # Colours by sensor parity: own colour, and the colour to the right.
+    cells = pattern_channels(pattern, origin)
+    rows = (np.arange(H) % 2)[:, None]
+    cols = (np.arange(W) % 2)[None, :]
+    own = cells[rows, cols]
+    right = cells[rows, (cols + 1) % 2]
+    green_site = own == 1
+    r_row = green_site & (right == 0)  # G pixel with R left/right (R row, B column)
+
+    red = np.where(own == 0, C, np.where(own == 2, rb_at_br, np.where(r_row, rb_at_g_horizontal, rb_at_g_vertical)))
+    green = np.where(green_site, C, g_at_rb)
+    blue = np.where(own == 2, C, np.where(own == 0, rb_at_br, np.where(r_row, rb_at_g_vertical, rb_at_g_horizontal)))
+    return np.stack([red, green, blue]).astype(np.float32)
+
+
+class Malvar:
+    """Malvar-He-Cutler demosaicing on the device for an ``(H, W)`` sensor."""
+
+    def __init__(self, runtime, sensor_shape, pattern: str, origin=(0, 0)):
+        self.runtime = runtime
+        self.height, self.width = (int(n) for n in sensor_shape)
+        if self.height < 1 or self.width < 1:
+            raise ValueError(f"sensor shape must be positive, got {tuple(sensor_shape)}")
+        self.pattern = packed_pattern(pattern, origin)
+        self.mosaic_shape = (self.height, self.width)
+        self.planes_shape = (3, self.height, self.width)
+
+    def forward(self, mosaic, out=None):
+        """``[H, W]`` float32 mosaic -> ``[3, H, W]`` float32 planes (into ``out`` if given)."""
+        check_device_array(mosaic, self.mosaic_shape, "mosaic")
+        out = output(self.runtime, out, self.planes_shape)
+        self.runtime.launch(
+            "malvar", "malvar", (self.width, self.height), mosaic.data, out.data,
+            np.int32(self.height), np.int32(self.width), self.pattern,
+        )
+        return out
+
+
+def _validate_mosaic(mosaic) -> np.ndarray:
+    """A float32 ``[H, W]`` copy of a real, finite, non-empty ``[H, W]`` or ``(H, W, 1)`` array."""
+    array = np.asarray(mosaic)
+    if array.dtype == np.bool_ or not (
+        np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)
+    ):
+        raise ValueError(f"mosaic must have a real numeric dtype, got {array.dtype}")
+    if array.ndim == 3 and array.shape[2] == 1:
+        array = array[:, :, 0]
+    if array.ndim != 2:
+        raise ValueError(f"mosaic must have shape (H, W) or (H, W, 1), got {array.shape}")
+    if array.size == 0:
+        raise ValueError(f"mosaic must not be empty, got shape {array.shape}")
+    with np.errstate(over="ignore"):  # out-of-range values become inf, rejected below
+        array = np.ascontiguousarray(array, dtype=np.float32)
+    if not np.all(np.isfinite(array)):
+        raise ValueError("mosaic must be finite (it holds NaN or infinity, possibly after conversion to float32)")
+    return array
+
+
+def malvar(mosaic, pattern: str, origin=(0, 0), device=None) -> np.ndarray:
+    """Demosaic a Bayer ``mosaic`` on an OpenCL device: ``(H, W)`` -> ``(H, W, 3)`` float32 RGB.
+
+    ``mosaic`` is a 2D (or ``(H, W, 1)``) real array, converted to float32 without
+    scaling. ``pattern`` is one of RGGB, GRBG, GBRG, BGGR (colours of pixels (0, 0),
+    (0, 1), (1, 0), (1, 1)); ``origin`` is the sensor (row, col) of the first pixel.
+    ``device`` selects the device as in :func:`lfcl.device.get_runtime`.
+    """
+    from ..device import get_runtime
+
+    pattern = parse_pattern(pattern)
+    array = _validate_mosaic(mosaic)
+    runtime = get_runtime(device)
+    op = Malvar(runtime, array.shape, pattern, origin)
+    planes = op.forward(runtime.to_device(array)).get()
+    return np.ascontiguousarray(planes.transpose(1, 2, 0))

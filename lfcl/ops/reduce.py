@@ -1,0 +1,164 @@
+"""Accurate reductions: dot product, squared 2-norm and sum of float32 arrays.
+
+The device versions use the compensated Dot2 / Sum2 scheme of Ogita, Rump and
+Oishi (kernels/reduce.cl): a fixed number ``G`` of work-items each carry a
+(sum, error) float pair per SIMD lane, and the host adds the ``G`` pairs in
+float64 with :func:`math.fsum`. The result is as accurate as a float64
+accumulation (relative error ~1e-7 or better even for 1e8 random-sign terms),
+at the speed of one streaming read. The numpy twins accumulate in float64.
+
+Example::
+
+    >>> import numpy as np
+    >>> from lfcl.ops.reduce import dot_np, norm2_np
+    >>> dot_np(np.array([1, 2], np.float32), np.array([3, 4], np.float32))
+    11.0
+    >>> norm2_np(np.array([3, 4], np.float32))
+    25.0
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pyopencl as cl
+
+from . import check_device_array
+
+# float64 accumulation of the numpy twins, in slices of this many elements so a
+# 1e8-element float32 array never gets a 800 MB float64 copy.
+_NP_BLOCK = 1 << 22
+
+
+def _check_host(x: np.ndarray, name: str, shape=None) -> np.ndarray:
+    """``x`` flattened; ``ValueError`` unless floating point (and of ``shape``)."""
+    x = np.asarray(x)
+    if shape is not None and x.shape != tuple(shape):
+        raise ValueError(f"{name} must have shape {tuple(shape)} like x, got {x.shape}")
+    if x.dtype.kind != "f":
+        raise ValueError(f"{name} must be a floating-point array, got {x.dtype}")
+    return x.ravel()
+
+
+def dot_np(x: np.ndarray, y: np.ndarray) -> float:
+    """<x, y> = sum x_i y_i, accumulated in float64."""
+    y = _check_host(y, "y", np.shape(x))
+    x = _check_host(x, "x")
+    return math.fsum(
+        float(np.dot(x[i:i + _NP_BLOCK].astype(np.float64), y[i:i + _NP_BLOCK].astype(np.float64)))
+        for i in range(0, x.size, _NP_BLOCK)
+    )
+
+
+def norm2_np(x: np.ndarray) -> float:
+    """||x||^2 = sum x_i^2, accumulated in float64."""
+    return dot_np(x, x)
+
+
+def diff_norm2_np(x: np.ndarray, y: np.ndarray) -> float:
+    """||x - y||^2, accumulated in float64."""
+    y = _check_host(y, "y", np.shape(x))
+    x = _check_host(x, "x")
+    return math.fsum(
+        float(np.sum((x[i:i + _NP_BLOCK].astype(np.float64) - y[i:i + _NP_BLOCK]) ** 2))
+        for i in range(0, x.size, _NP_BLOCK)
+    )
+
+
+def abs_sum_np(x: np.ndarray) -> float:
+    """sum |x_i|, accumulated in float64."""
+    x = _check_host(x, "x")
+    return math.fsum(float(np.abs(x[i:i + _NP_BLOCK]).sum(dtype=np.float64)) for i in range(0, x.size, _NP_BLOCK))
+
+
+def sum_np(x: np.ndarray) -> float:
+    """sum x_i, accumulated in float64."""
+    x = _check_host(x, "x")
+    return math.fsum(float(x[i:i + _NP_BLOCK].sum(dtype=np.float64)) for i in range(0, x.size, _NP_BLOCK))
+
+
+def default_work_items(device: cl.Device) -> int:
+    """How many work-items (partial pairs) a reduction uses on ``device``.
+
+    A CPU runs each work-item's chunk run as one streaming read; a few hundred per
+    core balance the load (256 per core measured best on PoCL, 2 cores, n = 1e4
+    .. 1e8). A GPU needs thousands in flight to hide memory latency.
+    """
+    if device.type & cl.device_type.CPU:
+        return min(256 * device.max_compute_units, 4096)
+    return 4096
+
+
+class Reductions:
+    """dot, squared norm and sum of float32 device arrays, any shape and length.
+
+    The ``G`` partial pairs live in one device buffer and one host array, both
+    allocated here and reused by every call (a call blocks until its result is
+    on the host). One object must not be used from two threads at once.
+
+    Example::
+
+        >>> from lfcl.device import get_runtime
+        >>> rt = get_runtime()
+        >>> x = rt.to_device(np.arange(5, dtype=np.float32))
+        >>> Reductions(rt).norm2(x)
+        30.0
+    """
+
+    def __init__(self, runtime, work_items: int | None = None, interleaved: bool | None = None):
+        self.runtime = runtime
+        device = runtime.device
+        self.work_items = int(work_items) if work_items is not None else default_work_items(device)
+        if self.work_items < 1:
+            raise ValueError(f"work_items must be >= 1, got {self.work_items}")
+        # contiguous runs per work-item on a CPU, coalesced (interleaved) chunks elsewhere
+        if interleaved is None:
+            interleaved = not device.type & cl.device_type.CPU
+        self.interleaved = np.int32(bool(interleaved))
+        self._host = np.empty(2 * self.work_items, np.float32)
+        self._partial = cl.Buffer(runtime.context, cl.mem_flags.WRITE_ONLY, self._host.nbytes)
+
+    def _finish(self, kernel: str, *args) -> float:
+        self.runtime.launch(
+            "reduce", kernel, (self.work_items,), *args, self.interleaved, self._partial
+        )
+        cl.enqueue_copy(self.runtime.queue, self._host, self._partial, is_blocking=True)
+        return math.fsum(self._host.tolist())
+
+    def dot(self, x, y) -> float:
+        """<x, y> = sum x_i y_i (x, y: float32 device arrays of one shape)."""
+        check_device_array(x, x.shape, "x")
+        check_device_array(y, x.shape, "y")
+        if x.size == 0:
+            return 0.0
+        return self._finish("dot_partials", x.data, y.data, np.uint64(x.size))
+
+    def norm2(self, x) -> float:
+        """||x||^2 = sum x_i^2, the squared 2-norm."""
+        check_device_array(x, x.shape, "x")
+        if x.size == 0:
+            return 0.0
+        return self._finish("norm2_partials", x.data, np.uint64(x.size))
+
+    def diff_norm2(self, x, y) -> float:
+        """||x - y||^2 without a temporary (x, y: float32 device arrays of one shape)."""
+        check_device_array(x, x.shape, "x")
+        check_device_array(y, x.shape, "y")
+        if x.size == 0:
+            return 0.0
+        return self._finish("diff_norm2_partials", x.data, y.data, np.uint64(x.size))
+
+    def abs_sum(self, x) -> float:
+        """sum |x_i|, the l1 norm."""
+        check_device_array(x, x.shape, "x")
+        if x.size == 0:
+            return 0.0
+        return self._finish("abs_sum_partials", x.data, np.uint64(x.size))
+
+    def sum(self, x) -> float:
+        """sum x_i."""
+        check_device_array(x, x.shape, "x")
+        if x.size == 0:
+            return 0.0
+        return self._finish("sum_partials", x.data, np.uint64(x.size))

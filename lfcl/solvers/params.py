@@ -1,0 +1,96 @@
+"""Parameters and results shared by the ADMM solvers (device and numpy reference)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+
+@dataclasses.dataclass(frozen=True)
+class AdmmParams:
+    """Settings of the ADMM-TV solver (paper, section 3.4).
+
+    lam:        weight of the TV prior (lambda).
+    rho:        augmented-Lagrangian penalty; kappa = lam / rho is the shrinkage threshold.
+    max_iter:   ADMM iterations at most.
+    cg_steps:   conjugate-gradient steps at most per x-update (warm-started).
+    cg_tol:     CG stops early when ||r|| <= cg_tol * ||rhs||.
+    abs_tol, rel_tol: Boyd et al.'s stopping rule on the primal and dual residuals
+                (0 disables it).
+    change_tol: stop when rms(x_k - x_{k-1}) <= change_tol (0 disables it); the early
+                stop that the noise-matched defaults use (docs/admm.md).
+    """
+
+    lam: float = 0.01
+    rho: float = 0.3
+    max_iter: int = 30
+    cg_steps: int = 4
+    cg_tol: float = 1e-4
+    abs_tol: float = 0.0
+    rel_tol: float = 0.0
+    change_tol: float = 0.0
+
+    def __post_init__(self):
+        for name in ("lam", "rho", "cg_tol", "abs_tol", "rel_tol", "change_tol"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"ADMM parameter {name} must be a finite number >= 0, got {value!r}")
+        if self.rho <= 0:
+            raise ValueError(f"ADMM parameter rho must be > 0, got {self.rho!r}")
+        for name in ("max_iter", "cg_steps"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"ADMM parameter {name} must be an integer >= 1, got {value!r}")
+
+    @property
+    def kappa(self) -> float:
+        return self.lam / self.rho
+
+
+@dataclasses.dataclass
+class IterationRecord:
+    """What one ADMM iteration did."""
+
+    iteration: int
+    objective: float  # 1/2 ||A x - b||^2 + lam ||D x||_1
+    primal_residual: float  # ||D x - z||
+    dual_residual: float  # rho ||D^T (z - z_prev)||
+    rms_change: float  # rms(x_k - x_{k-1})
+    cg_steps: int
+
+
+@dataclasses.dataclass
+class AdmmResult:
+    x: object  # [3, H, W] planes: numpy (reference) or a device array
+    history: list[IterationRecord]
+    stop_reason: str
+
+    @property
+    def iterations(self) -> int:
+        return len(self.history)
+
+
+def stop_reason(params: AdmmParams, record: IterationRecord, primal_scale: float, dual_scale: float,
+                n_z: int, n_x: int) -> str | None:
+    """Why to stop after ``record``, or None to go on.
+
+    primal_scale = max(||D x||, ||z||), dual_scale = ||rho D^T u|| (Boyd et al. 2011, 3.3.1).
+    """
+    values = (record.objective, record.primal_residual, record.dual_residual, record.rms_change)
+    if not all(math.isfinite(v) for v in values):
+        raise FloatingPointError(
+            f"ADMM diverged at iteration {record.iteration}: objective {record.objective:.4g}, "
+            f"primal residual {record.primal_residual:.4g}, dual residual {record.dual_residual:.4g}"
+        )
+    if params.change_tol > 0 and record.rms_change <= params.change_tol:
+        return f"rms change {record.rms_change:.3g} <= change_tol {params.change_tol:.3g}"
+    if params.abs_tol > 0 or params.rel_tol > 0:
+        eps_primal = math.sqrt(n_z) * params.abs_tol + params.rel_tol * primal_scale
+        eps_dual = math.sqrt(n_x) * params.abs_tol + params.rel_tol * dual_scale
+        if record.primal_residual <= eps_primal and record.dual_residual <= eps_dual:
+            return "primal and dual residuals below tolerance"
+    if record.iteration >= params.max_iter:
+        return f"reached max_iter {params.max_iter}"
+    return None

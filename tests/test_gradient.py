@@ -1,0 +1,102 @@
+"""Forward differences D, adjoint D^T and D^T D: device vs numpy, a loop reference, dot tests."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from lfcl.layout import DIMS
+from lfcl.ops.gradient import Gradient, gradient_adjoint_np, gradient_gram_np, gradient_np
+from conftest import relative_dot_error
+
+SUBSETS = [c for r in range(1, 5) for c in itertools.combinations(DIMS, r)]
+# (channels, S, T, U, V): odd pitches, a single lens, sizes that fit no work-group size.
+GEOMETRIES = [(3, 3, 5, 9, 9), (3, 1, 1, 9, 9), (1, 4, 3, 3, 5), (2, 7, 2, 1, 4)]
+
+
+def loop_gradient(x5: np.ndarray, dim: str) -> np.ndarray:
+    """D_d on a [C, S, U, T, V] array, one sample at a time (the definition)."""
+    axis = {"s": 1, "u": 2, "t": 3, "v": 4}[dim]
+    out = np.zeros_like(x5)
+    for index in np.ndindex(x5.shape):
+        if index[axis] + 1 < x5.shape[axis]:
+            nxt = list(index)
+            nxt[axis] += 1
+            out[index] = x5[tuple(nxt)] - x5[index]
+    return out
+
+
+def planes(rng, C, S, T, U, V, dtype=np.float32):
+    return rng.standard_normal((C, S * U, T * V)).astype(dtype)
+
+
+@pytest.mark.parametrize("dim", DIMS)
+def test_numpy_twin_matches_the_definition(rng, dim):
+    C, S, T, U, V = 2, 3, 4, 3, 5
+    x = planes(rng, C, S, T, U, V, np.float64)
+    expected = loop_gradient(x.reshape(C, S, U, T, V), dim).reshape(x.shape)
+    np.testing.assert_array_equal(gradient_np(x, (U, V), dim)[0], expected)
+
+
+def test_gradient_blocks_follow_uvst_order(rng):
+    x = planes(rng, 3, 2, 2, 3, 3, np.float64)
+    both = gradient_np(x, (3, 3), "tu")  # given out of order
+    np.testing.assert_array_equal(both[0], gradient_np(x, (3, 3), "u")[0])
+    np.testing.assert_array_equal(both[1], gradient_np(x, (3, 3), "t")[0])
+
+
+@pytest.mark.parametrize("dims", SUBSETS, ids="".join)
+@pytest.mark.parametrize("geometry", GEOMETRIES, ids=str)
+def test_device_matches_numpy(runtime, rng, dims, geometry):
+    C, S, T, U, V = geometry
+    x = planes(rng, C, S, T, U, V)
+    op = Gradient(runtime, x.shape, (U, V), dims)
+    z = rng.standard_normal(op.gradient_shape).astype(np.float32)
+    np.testing.assert_array_equal(op.forward(runtime.to_device(x)).get(), gradient_np(x, (U, V), dims))
+    np.testing.assert_allclose(op.adjoint(runtime.to_device(z)).get(), gradient_adjoint_np(z, (U, V), dims), atol=1e-5)
+    np.testing.assert_allclose(op.gram(runtime.to_device(x)).get(), gradient_gram_np(x, (U, V), dims), atol=1e-5)
+
+
+@pytest.mark.parametrize("dims", SUBSETS, ids="".join)
+def test_adjoint_dot_test(runtime, rng, dims):
+    C, S, T, U, V = 3, 5, 6, 9, 9
+    x = planes(rng, C, S, T, U, V)
+    op = Gradient(runtime, x.shape, (U, V), dims)
+    y = rng.standard_normal(op.gradient_shape).astype(np.float32)
+    dx = op.forward(runtime.to_device(x)).get().astype(np.float64)
+    dty = op.adjoint(runtime.to_device(y)).get().astype(np.float64)
+    assert relative_dot_error(np.vdot(dx, y), np.vdot(x, dty)) <= 1e-5
+    x64, y64 = x.astype(np.float64), y.astype(np.float64)
+    lhs = np.vdot(gradient_np(x64, (U, V), dims), y64)
+    rhs = np.vdot(x64, gradient_adjoint_np(y64, (U, V), dims))
+    assert relative_dot_error(lhs, rhs) <= 1e-12
+
+
+def test_gram_is_symmetric_positive_semidefinite(runtime, rng):
+    x = planes(rng, 3, 4, 4, 9, 9)
+    y = planes(rng, 3, 4, 4, 9, 9)
+    op = Gradient(runtime, x.shape, (9, 9), "uvst")
+    gx = op.gram(runtime.to_device(x)).get().astype(np.float64)
+    gy = op.gram(runtime.to_device(y)).get().astype(np.float64)
+    assert relative_dot_error(np.vdot(gx, y), np.vdot(x, gy)) <= 1e-5
+    assert np.vdot(gx, x) >= 0
+
+
+def test_constant_light_field_has_zero_gradient(runtime):
+    x = np.full((3, 18, 27), 0.7, np.float32)
+    op = Gradient(runtime, x.shape, (9, 9), "uvst")
+    assert not op.forward(runtime.to_device(x)).get().any()
+
+
+def test_bad_arguments_raise(runtime):
+    with pytest.raises(ValueError, match="subset of u, v, s, t"):
+        Gradient(runtime, (3, 9, 9), (9, 9), "uvx")
+    with pytest.raises(ValueError, match="subset of u, v, s, t"):
+        Gradient(runtime, (3, 9, 9), (9, 9), "uu")
+    with pytest.raises(ValueError, match="whole number"):
+        Gradient(runtime, (3, 10, 9), (9, 9), "uv")
+    op = Gradient(runtime, (3, 9, 9), (9, 9), "uv")
+    with pytest.raises(ValueError, match="z must be float32"):
+        op.adjoint(runtime.to_device(np.zeros((3, 3, 9, 9), np.float32)))
