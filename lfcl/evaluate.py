@@ -41,7 +41,7 @@ def load_capture(directory) -> Capture:
         if not (directory / name).is_file():
             raise ValueError(f"{directory} is not a capture folder: {name} is missing (make one with `lfcl simulate`)")
     meta = json.loads((directory / "meta.json").read_text())
-    pitch = tuple(int(p) for p in meta["geometry"]["pitch"])
+    pitch = tuple(int(p) for p in meta["pitch"])
     raw = read_mosaic(directory / "raw.dng")
     truth = np.load(directory / "truth.npy")
     shape = LightFieldShape.from_sensor(raw.data.shape, pitch)
@@ -125,3 +125,56 @@ def check_methods(methods) -> list[str]:
     if not methods:
         raise ValueError(f"no methods given: choose from {', '.join(METHODS)}")
     return [parse_method(m) for m in methods]
+
+
+def capture_in_memory(meta: dict, lux: float) -> Capture:
+    """Re-simulate a capture folder's scene at another illumination (same seed and camera)."""
+    from .sim import simulate
+
+    scene = meta["scene"]
+    kwargs = dict(lenses=tuple(meta["lenses"]), pitch=int(meta["pitch"][0]), pattern=meta["pattern"],
+                  lux=lux, seed=int(meta["seed"]), vignetting=bool(meta.get("vignetting", {}).get("enabled", False)))
+    if scene.get("kind") == "scene":
+        sim = simulate(scene["name"], texture=scene.get("texture"), **kwargs)
+    elif scene.get("kind") == "lightfield" and scene.get("path"):
+        kwargs.pop("pitch")
+        sim = simulate(lightfield=scene["path"], **kwargs)
+    else:
+        raise ValueError(f"cannot re-simulate a capture made from {scene.get('kind')!r} for a lux sweep")
+    mosaic = sim.normalised_raw()
+    return Capture(Path("."), mosaic, sim.pattern, tuple(sim.geometry.pitch), sim.truth, sim.meta,
+                   list(sim.sensor.noise_profile()) * 3)
+
+
+def centre_gradient_images(truth: np.ndarray) -> dict:
+    """The centre view and |gradient| of the light field along each dim, at the centre view."""
+    S, T, U, V, _ = truth.shape
+    u0, v0 = U // 2, V // 2
+    grey = truth.mean(axis=-1)
+    images = {"ground truth": np.clip(centre_view(truth).mean(axis=-1) / max(float(grey.max()), 1e-6), 0, 1)}
+    images["u"] = np.abs(grey[:, :, min(u0 + 1, U - 1), v0] - grey[:, :, u0, v0])
+    images["v"] = np.abs(grey[:, :, u0, min(v0 + 1, V - 1)] - grey[:, :, u0, v0])
+    images["s"] = np.abs(np.diff(grey[:, :, u0, v0], axis=0, append=grey[-1:, :, u0, v0]))
+    images["t"] = np.abs(np.diff(grey[:, :, u0, v0], axis=1, append=grey[:, -1:, u0, v0]))
+    return images
+
+
+def format_sweep(sweep: list[dict]) -> str:
+    """PSNR against illumination, centre / mean per method (paper, Fig. 10 as a table)."""
+    methods = [r["method"] for r in sweep[0]["results"]]
+    lines = ["**PSNR against illumination** (centre / mean, dB)", "",
+             "| lux | " + " | ".join(methods) + " |", "|---" * (len(methods) + 1) + "|"]
+    for entry in sweep:
+        cells = [f"{r['psnr_center']:.2f} / {r['psnr_mean']:.2f}" for r in entry["results"]]
+        lines.append(f"| {entry['lux']:g} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def plot_sweep(sweep: list[dict], path, label: str):
+    lux = [e["lux"] for e in sweep]
+    methods = [r["method"] for r in sweep[0]["results"]]
+    series = {}
+    for view in ("center", "mean"):
+        for i, m in enumerate(methods):
+            series[f"{m} ({view})"] = [e["results"][i][f"psnr_{view}"] for e in sweep]
+    return plots.psnr_curves(lux, series, path, "mean illuminance (lux)", "PSNR (dB)", f"{label}: PSNR vs illumination")

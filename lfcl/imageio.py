@@ -59,7 +59,8 @@ def write_image(path, image: np.ndarray, metadata: dict | None = None, *, pixel_
     EXR keeps float32 values as they are (scene-linear, unclipped); TIFF is
     16-bit and PNG 8-bit, both clipped to [0, 1] by OpenImageIO's conversion.
     ``metadata`` goes into the file's header as ``lfcl:<key>`` attributes
-    (non-string values as JSON).
+    (non-string values as JSON) and, whole, as JSON in ImageDescription (the one
+    field TIFF keeps).
     """
     path = Path(path)
     fmt = pixel_format if pixel_format is not None else _FORMATS.get(path.suffix.lower())
@@ -78,6 +79,9 @@ def write_image(path, image: np.ndarray, metadata: dict | None = None, *, pixel_
         spec.attribute("compression", "zip")
     for key, value in (metadata or {}).items():
         spec.attribute(f"lfcl:{key}", value if isinstance(value, str) else json.dumps(value))
+    if metadata:
+        # TIFF keeps no custom attributes; ImageDescription survives in every format.
+        spec.attribute("ImageDescription", json.dumps({"lfcl": metadata}))
     with atomic_path(path) as tmp:
         out = oiio.ImageOutput.create(str(tmp))
         if out is None or not out.open(str(tmp), spec):

@@ -121,6 +121,12 @@ def exchange_to_planes(lightfield: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(planes, dtype=np.float32)
 
 
+def tiled_views(lightfield: np.ndarray) -> np.ndarray:
+    """The paper's Figure 4b: ``[S, T, U, V, C]`` -> ``[U*S, V*T, C]``, a U x V grid of S x T views."""
+    S, T, U, V, C = lightfield.shape
+    return np.ascontiguousarray(lightfield.transpose(2, 0, 3, 1, 4)).reshape(U * S, V * T, C)
+
+
 def dims_mask(dims) -> int:
     """Bit mask of a subset of ('u', 'v', 's', 't'), in that bit order."""
     if isinstance(dims, str):

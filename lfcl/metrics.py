@@ -40,8 +40,3 @@ def lightfield_scores(estimate: np.ndarray, truth: np.ndarray) -> dict:
         "psnr_mean": psnr(mean_image(estimate), mean_image(truth)),
     }
 
-
-def tiled_views(lightfield: np.ndarray) -> np.ndarray:
-    """The paper's Figure 4b: a U x V grid of S x T views, as one [U*S, V*T, 3] image."""
-    S, T, U, V, C = lightfield.shape
-    return np.ascontiguousarray(lightfield.transpose(2, 0, 3, 1, 4).reshape(U * S, V * T, C))

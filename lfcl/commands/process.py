@@ -43,9 +43,9 @@ def _parse_outputs(text: str) -> list[str]:
 def command(raw, out_dir, method, pitch, pattern, outputs, lam, iterations, strength, as_json, device):
     """Demosaic a lenslet RAW (DNG, camera raw, or EXR/TIFF/PNG mosaic) into a 4D light field."""
     from ..imageio import write_image, write_npy
-    from ..layout import LightFieldShape, planes_to_exchange
+    from ..layout import LightFieldShape, planes_to_exchange, tiled_views
     from ..methods import demosaic_lightfield
-    from ..metrics import centre_view, mean_image, tiled_views
+    from ..metrics import centre_view, mean_image
     from ..noise import from_noise_profile
     from ..raw import read_mosaic
 

@@ -112,7 +112,8 @@ class AdmmSolver:
         """Run ADMM on mosaic ``b`` [H, W] from ``x0`` [3, H, W] (both float32 device arrays).
 
         ``x0`` is not modified; the result's ``x`` is a new device array.
-        ``callback(record)`` is called after every iteration (progress bars).
+        ``callback(record, x)`` is called after every iteration (progress bars,
+        parameter sweeps); ``x`` is the current device array, not to be modified.
         """
         check_device_array(b, (self.height, self.width), "b")
         check_device_array(x0, self.planes_shape, "x0")
@@ -148,7 +149,7 @@ class AdmmSolver:
             )
             history.append(record)
             if callback is not None:
-                callback(record)
+                callback(record, x)
             primal_scale = dual_scale = 0.0
             if params.abs_tol > 0 or params.rel_tol > 0:
                 primal_scale = math.sqrt(max(red.norm2(self._dx), red.norm2(self._z)))

@@ -84,7 +84,9 @@ def stop_reason(params: AdmmParams, record: IterationRecord, primal_scale: float
             f"ADMM diverged at iteration {record.iteration}: objective {record.objective:.4g}, "
             f"primal residual {record.primal_residual:.4g}, dual residual {record.dual_residual:.4g}"
         )
-    if params.change_tol > 0 and record.rms_change <= params.change_tol:
+    # From the Malvar start the first x-update changes nothing (Malvar keeps every
+    # measured sample), so the change rule only applies from the second iteration.
+    if params.change_tol > 0 and record.iteration > 1 and record.rms_change <= params.change_tol:
         return f"rms change {record.rms_change:.3g} <= change_tol {params.change_tol:.3g}"
     if params.abs_tol > 0 or params.rel_tol > 0:
         eps_primal = math.sqrt(n_z) * params.abs_tol + params.rel_tol * primal_scale

@@ -1,0 +1,293 @@
+"""Simulate one lenslet capture end to end, and write it to a folder.
+
+:func:`simulate` renders (or loads) the light field, scales it so that the mean
+illuminance (luminance ``Y = 0.2126 R + 0.7152 G + 0.0722 B`` of the linear
+camera RGB, averaged over every sample) equals ``lux``, converts to expected
+electrons with :class:`lfcl.sim.sensor.SensorModel`, CFA-samples it through
+:class:`lfcl.sim.geometry.LensletGeometry`, applies the optional microlens
+vignetting and exposes it with noise. A flat white field at 80 % of full well
+goes through the same camera for the white image.
+
+Ground truth (``Capture.truth``): ``[S, T, U, V, 3]`` float32, noise-free, no
+vignetting, in the pipeline's normalised raw scale ``(raw - black) / (white -
+black)``, i.e. expected electrons / full-well electrons, clipped at 1.0.
+
+:func:`write_capture` writes ``raw.dng``, ``white.dng``, ``meta.json``,
+``truth.npy`` and ``truth_views.exr`` into a temporary sibling folder and moves
+them into place only once all were written.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import os
+import shutil
+import tempfile
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..imageio import write_image, write_json, write_npy
+from ..layout import parse_pattern, tiled_views
+from .dng import write_dng
+from .geometry import LensletGeometry
+from .lightfield import load_lightfield
+from .planes import Plane, render_planes
+from .scenes import check_scene, scene_planes
+from .sensor import SensorModel
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float64)  # Rec. 709 / sRGB Y weights
+WHITE_FRACTION = 0.8
+FILES = ("raw.dng", "white.dng", "meta.json", "truth.npy", "truth_views.exr")
+
+
+@dataclasses.dataclass
+class Capture:
+    """A simulated lenslet capture: raws, ground truth and metadata."""
+
+    raw: np.ndarray  # uint16 [H, W] CFA mosaic
+    white: np.ndarray  # uint16 [H, W] white image
+    truth: np.ndarray  # float32 [S, T, U, V, 3], normalised (see module docstring)
+    meta: dict
+    geometry: LensletGeometry
+    sensor: SensorModel
+    pattern: str
+
+    @property
+    def black_level(self) -> int:
+        return int(self.sensor.black_level_dn)
+
+    @property
+    def white_level(self) -> int:
+        return int(self.sensor.white_level_dn)
+
+    def normalised_raw(self) -> np.ndarray:
+        """``(raw - black) / (white - black)`` as float32."""
+        return ((self.raw.astype(np.float32) - self.black_level) / (self.white_level - self.black_level))
+
+
+def parse_lenses(value) -> tuple[int, int]:
+    """``"64x64"``, ``"64"``, ``64`` or ``(S, T)`` -> ``(S, T)``; ``ValueError`` for anything else."""
+    if isinstance(value, str):
+        parts = value.lower().replace("×", "x").split("x")
+        try:
+            numbers = [int(p.strip()) for p in parts]
+        except ValueError:
+            raise ValueError(f"malformed --lenses {value!r}: expected SxT, e.g. 64x64") from None
+    elif isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        numbers = [int(value)]
+    else:
+        try:
+            numbers = [int(n) for n in value]
+        except (TypeError, ValueError):
+            raise ValueError(f"malformed lenses {value!r}: expected (S, T)") from None
+    if len(numbers) == 1:
+        numbers = numbers * 2
+    if len(numbers) != 2:
+        raise ValueError(f"malformed lenses {value!r}: expected SxT, e.g. 64x64")
+    if min(numbers) < 1:
+        raise ValueError(f"lenses must be at least 1x1, got {numbers[0]}x{numbers[1]}")
+    return numbers[0], numbers[1]
+
+
+def parse_exposure(value) -> float:
+    """``"1/90"``, ``"0.011"`` or a number -> seconds (> 0)."""
+    try:
+        seconds = float(Fraction(value.strip())) if isinstance(value, str) else float(value)
+    except (ValueError, ZeroDivisionError, TypeError):
+        raise ValueError(f"malformed exposure {value!r}: expected seconds, e.g. 1/90 or 0.011") from None
+    if not np.isfinite(seconds) or seconds <= 0:
+        raise ValueError(f"exposure must be positive, got {value!r}")
+    return seconds
+
+
+def _check_lux(lux) -> float:
+    try:
+        lux = float(lux)
+    except (TypeError, ValueError):
+        raise ValueError(f"lux must be a number, got {lux!r}") from None
+    if not np.isfinite(lux) or lux <= 0:
+        raise ValueError(f"lux must be positive, got {lux:g}")
+    return lux
+
+
+def _check_pitch(pitch) -> int:
+    if isinstance(pitch, bool) or not isinstance(pitch, (int, np.integer)):
+        raise ValueError(f"pitch must be an integer number of pixels, got {pitch!r}")
+    if pitch < 2:
+        raise ValueError(f"pitch must be at least 2 pixels per microlens, got {pitch}")
+    return int(pitch)
+
+
+def simulate(scene: str = "charts", lenses=None, pitch: int | None = None, pattern: str = "GRBG",
+             lux: float = 12.0, seed: int = 0, *, exposure=None, vignetting: bool = False,
+             texture=None, lightfield=None, planes: list[Plane] | None = None,
+             sensor: SensorModel | None = None, supersample: int = 3, f_number: float = 2.8,
+             progress: bool | None = False) -> Capture:
+    """Simulate a lenslet capture; every bad argument is a one-line ``ValueError``.
+
+    ``lenses`` (``(S, T)`` or ``"SxT"``) defaults to 64x64 and ``pitch`` to 9.
+    ``lightfield`` (an HCI-layout folder or a ``.npy``, or an ``[S, T, U, V, 3]``
+    array) replaces the scene and sets S, T, U, V (``lenses`` crops its centre,
+    ``None`` keeps all; ``pitch``, if given, must match). ``planes`` renders custom planes instead of a
+    named scene. ``exposure`` (seconds, or "1/90") overrides the sensor's.
+    """
+    lux = _check_lux(lux)
+    pattern = parse_pattern(pattern)
+    seed = int(seed)
+    if seed < 0:
+        raise ValueError(f"seed must be >= 0, got {seed}")
+    sensor = sensor if sensor is not None else SensorModel()
+    if exposure is not None:
+        sensor = dataclasses.replace(sensor, exposure_s=parse_exposure(exposure))
+    if texture is not None and lightfield is not None:
+        raise ValueError("--texture and --lightfield exclude each other")
+    lenses = parse_lenses(lenses) if lenses is not None else None
+
+    if lightfield is not None:
+        if isinstance(lightfield, np.ndarray):
+            radiance = np.asarray(lightfield, dtype=np.float32)
+            if radiance.ndim != 5 or radiance.shape[4] != 3:
+                raise ValueError(f"a light field must have shape [S, T, U, V, 3], got {list(radiance.shape)}")
+            if lenses is not None:
+                S0, T0 = radiance.shape[:2]
+                if lenses[0] > S0 or lenses[1] > T0:
+                    raise ValueError(f"lenses {lenses[0]}x{lenses[1]} exceed the light field's {S0}x{T0}")
+                s0, t0 = (S0 - lenses[0]) // 2, (T0 - lenses[1]) // 2
+                radiance = radiance[s0:s0 + lenses[0], t0:t0 + lenses[1]]
+            radiance = np.array(np.clip(radiance, 0, None), dtype=np.float32)
+            source = {"kind": "lightfield", "path": None}
+        else:
+            radiance = load_lightfield(lightfield, lenses)
+            source = {"kind": "lightfield", "path": str(lightfield)}
+        U, V = radiance.shape[2:4]
+        if pitch is not None and (int(pitch) != U or int(pitch) != V):
+            raise ValueError(f"--pitch {pitch} does not match the light field's {U}x{V} views")
+        geometry = LensletGeometry(radiance.shape[:2], (U, V))
+        plane_meta = None
+    else:
+        pitch = _check_pitch(9 if pitch is None else pitch)
+        lenses = lenses if lenses is not None else (64, 64)
+        geometry = LensletGeometry(lenses, (pitch, pitch))
+        if planes is None:
+            scene = check_scene(scene)
+            planes = scene_planes(scene, lenses, seed, (pitch, pitch), texture)
+            source = {"kind": "scene", "name": scene, "texture": None if texture is None else str(texture)}
+        else:
+            source = {"kind": "planes", "name": "custom"}
+        radiance = render_planes(planes, lenses, (pitch, pitch), supersample=supersample, progress=progress)
+        plane_meta = [p.as_meta() for p in planes]
+
+    luminance = radiance.reshape(-1, 3) @ LUMINANCE.astype(np.float32)
+    mean_y, peak_y = float(luminance.mean(dtype=np.float64)), float(luminance.max())
+    del luminance
+    if not np.isfinite(mean_y) or mean_y <= 0:
+        raise ValueError("the scene is black (mean luminance 0): nothing to scale to the requested lux")
+    lux_per_unit = lux / mean_y
+    # In place: radiance -> expected electrons / full well (unclipped).
+    radiance *= np.float32(lux_per_unit * sensor.electrons_per_lux / sensor.full_well_e)
+    expected = geometry.mosaic(radiance, pattern).astype(np.float64)
+    truth = np.minimum(radiance, np.float32(1.0), out=radiance)
+    del radiance
+
+    vignette = geometry.vignetting_sensor(f_number) if vignetting else None
+    raw_rng, white_rng = (np.random.default_rng(s) for s in np.random.SeedSequence([seed, 0x5E2502]).spawn(2))
+    if vignette is not None:
+        expected *= vignette
+    raw = sensor.expose(expected, raw_rng)
+    del expected
+    flat = np.full(geometry.sensor_shape, WHITE_FRACTION, dtype=np.float64)
+    if vignette is not None:
+        flat *= vignette
+    white = sensor.expose(flat, white_rng)
+    del flat
+
+    s_coef, o_coef = sensor.noise_profile()
+    mean_normalised = float(sensor.lux_to_normalised(lux))
+    meta = {
+        "generator": f"lfcl {__version__} simulate",
+        "scene": source,
+        "planes": plane_meta,
+        "lux": lux,
+        "seed": seed,
+        "pattern": pattern,
+        "lenslet": geometry.as_meta(),
+        "pitch": list(geometry.pitch),
+        "lenses": list(geometry.lenses),
+        "grid": geometry.grid,
+        "offset": list(geometry.offset),
+        "sensor": sensor.as_meta(),
+        "black_level": int(sensor.black_level_dn),
+        "white_level": int(sensor.white_level_dn),
+        "electrons_per_lux": sensor.electrons_per_lux,
+        "exposure": {
+            "lux_per_scene_unit": lux_per_unit,
+            "mean_luminance_scene_units": mean_y,
+            "peak_lux": peak_y * lux_per_unit,
+            "mean_electrons": lux * sensor.electrons_per_lux,
+            "mean_normalised": mean_normalised,
+            "luminance_weights": LUMINANCE.tolist(),
+        },
+        "noise": {
+            "profile": [[s_coef, o_coef]] * 3,
+            "variance": "S * x + O in normalised units x = (raw - black) / (white - black)",
+            "sigma": float(sensor.noise_sigma(mean_normalised)),
+            "sigma_at_mean": float(sensor.noise_sigma(mean_normalised)),
+            "sigma_at_1_lux": float(sensor.noise_sigma(sensor.lux_to_normalised(1.0))),
+            "sigma_floor": float(np.sqrt(o_coef)),
+        },
+        "vignetting": {"enabled": bool(vignetting), "model": "cos^4, microlens f-number", "f_number": f_number,
+                       "uv_factors": geometry.vignetting(f_number).tolist() if vignetting else None},
+        "white": {"file": "white.dng", "level_normalised": WHITE_FRACTION},
+        "truth": {
+            "file": "truth.npy", "shape": list(truth.shape), "dtype": "float32",
+            "layout": "[S, T, U, V, 3] linear camera RGB",
+            "scale": "expected electrons / full-well electrons = (raw - black) / (white - black), clipped at 1.0",
+            "noise_free": True, "vignetting": False,
+        },
+        "truth_views": {"file": "truth_views.exr",
+                        "layout": "U x V grid of S x T tiles; tile (u, v) is the view (u, v)"},
+        "supersample": supersample,
+        "files": list(FILES),
+    }
+    return Capture(raw, white, truth, meta, geometry, sensor, pattern)
+
+
+def write_capture(capture: Capture, directory) -> Path:
+    """Write a capture's files into ``directory`` (created if missing, files replaced)."""
+    directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        raise ValueError(f"output {directory} exists and is not a folder")
+    parent = directory.absolute().parent
+    parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{directory.name}.", suffix=".tmp", dir=parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    try:
+        os.chmod(tmp, 0o777 & ~umask)
+        s, o = capture.sensor.noise_profile()
+        for name, mosaic in (("raw.dng", capture.raw), ("white.dng", capture.white)):
+            write_dng(tmp / name, mosaic, capture.pattern, capture.black_level, capture.white_level,
+                      [(s, o)] * 3)
+        write_npy(tmp / "truth.npy", capture.truth)
+        write_image(tmp / "truth_views.exr", tiled_views(capture.truth),
+                    {"layout": "U x V grid of S x T views", "lenses": list(capture.geometry.lenses),
+                     "pitch": list(capture.geometry.pitch)})
+        write_json(tmp / "meta.json", capture.meta)
+        for name in FILES:  # the temporary files were created 0600: give them the usual mode
+            os.chmod(tmp / name, 0o666 & ~umask)
+        if not directory.exists():
+            with contextlib.suppress(OSError):
+                os.rename(tmp, directory)
+                return directory
+        directory.mkdir(exist_ok=True)
+        for name in FILES:
+            os.replace(tmp / name, directory / name)
+        tmp.rmdir()
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return directory

@@ -1,0 +1,99 @@
+"""``lfcl devices`` and device selection errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from lfcl.commands import devices as devices_module
+from lfcl.commands.devices import command
+from lfcl.device import INSTALL_HINT, DeviceError, list_devices, select_device
+
+
+@pytest.fixture(autouse=True)
+def no_env_device(monkeypatch):
+    monkeypatch.delenv("LFCL_DEVICE", raising=False)
+
+
+def run(*args):
+    return CliRunner().invoke(command, list(args))
+
+
+def test_lists_devices():
+    result = run()
+    assert result.exit_code == 0, result.output
+    infos = list_devices()
+    assert len(infos) >= 1
+    for info in infos:
+        assert info.name in result.stdout
+        assert f"[{info.index}]" in result.stdout
+    marked = [line for line in result.stdout.splitlines() if line.startswith(" * ")]
+    assert len(marked) == 1 and "[0]" in marked[0]  # the first device by default
+    assert "compute units" in result.stdout and "max allocation" in result.stdout
+    assert result.stderr == ""
+
+
+def test_json():
+    result = run("--json")
+    assert result.exit_code == 0, result.output
+    payload = json.loads(result.stdout)
+    assert len(payload["devices"]) >= 1
+    first = payload["devices"][0]
+    for key in ("index", "platform", "name", "type", "compute_units", "global_mem_mib",
+                "max_alloc_mib", "max_work_group_size", "opencl_version", "selected"):
+        assert key in first
+    assert payload["selected"] == 0
+    assert [d["selected"] for d in payload["devices"]].count(True) == 1
+    assert payload["error"] is None
+
+
+def test_device_option_and_env_select(monkeypatch):
+    last = str(len(list_devices()) - 1)
+    payload = json.loads(run("--json", "--device", last).stdout)
+    assert payload["selected"] == int(last) and payload["selected_by"] == f"--device {last}"
+    monkeypatch.setenv("LFCL_DEVICE", last)
+    payload = json.loads(run("--json").stdout)
+    assert payload["selected"] == int(last) and payload["selected_by"] == f"LFCL_DEVICE={last}"
+    name = list_devices()[0].name
+    assert json.loads(run("--json", "--device", name.lower()).stdout)["selected"] is not None
+
+
+def test_select_device_bogus_name(monkeypatch):
+    with pytest.raises(DeviceError, match="no OpenCL device matches 'bogus-gpu'"):
+        select_device("bogus-gpu")
+    monkeypatch.setenv("LFCL_DEVICE", "bogus-gpu")
+    with pytest.raises(DeviceError, match="bogus-gpu"):
+        select_device()
+    with pytest.raises(DeviceError, match="does not exist"):
+        select_device(str(len(list_devices()) + 5))
+
+
+def test_bogus_env_device_is_reported(monkeypatch):
+    monkeypatch.setenv("LFCL_DEVICE", "bogus-gpu")
+    result = run()
+    assert result.exit_code == 1
+    assert list_devices()[0].name in result.stdout  # the list is still shown
+    assert " * " not in result.stdout
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "LFCL_DEVICE=bogus-gpu" in lines[0] and "no OpenCL device matches" in lines[0]
+
+
+def test_bogus_device_option():
+    result = run("--json", "--device", "bogus-gpu")
+    assert result.exit_code == 1
+    assert json.loads(result.stdout)["error"].startswith("no OpenCL device matches 'bogus-gpu'")
+    assert "bogus-gpu" in result.stderr
+
+
+def test_no_platform(monkeypatch):
+    def no_devices():
+        raise DeviceError(INSTALL_HINT)
+
+    monkeypatch.setattr(devices_module, "list_devices", no_devices)
+    result = run()
+    assert result.exit_code == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "pocl-opencl-icd" in lines[0]
+    assert result.stdout == ""
