@@ -48,3 +48,31 @@ inline size_t step_of(int d, int width, int U, int V)
     default:    return (size_t)V;
     }
 }
+
+// Flat arrays are processed in chunks of 16 floats (one SIMD register on a CPU);
+// only the last chunk of n floats may be short.
+#define LANES 16
+
+// Chunk k of x, zero-padded past the end n.
+inline float16 load_chunk(__global const float *x, ulong k, ulong n)
+{
+    if ((k + 1) * LANES <= n)
+        return vload16(k, x);
+    float lane[LANES];
+    for (ulong i = 0; i < LANES; ++i)
+        lane[i] = k * LANES + i < n ? x[k * LANES + i] : 0.0f;
+    return vload16(0, lane);
+}
+
+// Chunk k of x = v, dropping the lanes past the end n.
+inline void store_chunk(float16 v, __global float *x, ulong k, ulong n)
+{
+    if ((k + 1) * LANES <= n) {
+        vstore16(v, k, x);
+        return;
+    }
+    float lane[LANES];
+    vstore16(v, 0, lane);
+    for (ulong i = 0; i < LANES && k * LANES + i < n; ++i)
+        x[k * LANES + i] = lane[i];
+}

@@ -22,7 +22,6 @@
 // The error-free transformations need every product and sum rounded on its own.
 #pragma OPENCL FP_CONTRACT OFF
 
-#define LANES 16
 
 // a + b = s + *e exactly (Knuth's TwoSum: no branch, any order of magnitude).
 inline float16 two_sum(float16 a, float16 b, float16 *e)
@@ -72,26 +71,11 @@ inline void chunk_run(ulong chunks, ulong w, ulong G, int interleaved,
     }
 }
 
-// The floats x[from .. n) (fewer than 16), zero-padded to one chunk.
-inline float16 load_tail(__global const float *x, ulong from, ulong n)
-{
-    float lane[LANES];
-    for (int i = 0; i < LANES; ++i)
-        lane[i] = from + i < n ? x[from + i] : 0.0f;
-    return vload16(0, lane);
-}
-
 inline void store_partial(__global float *partial, ulong w, float16 s, float16 c)
 {
     fold_lanes(&s, &c);
     partial[2 * w] = s.s0;
     partial[2 * w + 1] = c.s0;
-}
-
-// One chunk of 16 floats of x, zero-padded past n (only the last chunk is short).
-inline float16 load_chunk(__global const float *x, ulong k, ulong n)
-{
-    return (k + 1) * LANES <= n ? vload16(k, x) : load_tail(x, k * LANES, n);
 }
 
 // The body every reduction shares: work-item w accumulates TERM(k) over its chunk

@@ -5,7 +5,7 @@ Per lens and colour we fit a plane ``a + b*u + c*v`` to that colour's samples in
 the inner ``(U-2) x (V-2)`` pixels (the rim is vignetted) and keep the residual
 variance; smooth patches leave almost pure noise. Binned by brightness, the
 variances follow the Poisson-Gaussian model ``var = gain * mean + floor``, fitted
-robustly (median per bin). ``sigma`` is the rms noise per raw pixel over the whole
+robustly (a low quantile per bin, see QUANTILE). ``sigma`` is the rms noise per raw pixel over the whole
 mosaic, in the normalised units of (raw - black) / (white - black).
 
 A DNG NoiseProfile (``var = S * x + O`` per plane), where present, gives the same
@@ -18,6 +18,7 @@ import dataclasses
 import math
 
 import numpy as np
+import scipy.stats
 
 from .layout import channel_map
 
@@ -33,10 +34,19 @@ class NoiseEstimate:
         return math.sqrt(max(self.gain * level + self.floor, 0.0))
 
 
+# Lenses whose view of the scene is textured inflate the residual variance; flat
+# ones show only noise. So per brightness bin we take a low quantile of the lens
+# variances and rescale it by the same quantile of the pure-noise distribution
+# (sigma^2 chi^2_dof / dof), which is unbiased when at least that share of the lenses
+# in the bin is flat.
+QUANTILE = 0.2
+
+
 def _plane_residual_variances(block: np.ndarray, mask: np.ndarray):
     """Per lens: (mean, residual variance) of the samples where ``mask`` is set.
 
-    block: [n_lenses, h, w] inner pixels of each lens; mask: [h, w] bool.
+    block: [n_lenses, h, w] inner pixels of each lens; mask: [h, w] bool. The
+    variances come rescaled so that their QUANTILE-quantile is sigma^2 for pure noise.
     """
     rows, cols = np.nonzero(mask)
     design = np.stack([np.ones(rows.size), rows - rows.mean(), cols - cols.mean()], axis=1)
@@ -44,7 +54,8 @@ def _plane_residual_variances(block: np.ndarray, mask: np.ndarray):
     samples = block[:, rows, cols].astype(np.float64)
     residual = samples @ projection.T
     dof = rows.size - design.shape[1]
-    return samples.mean(axis=1), (residual**2).sum(axis=1) / dof
+    to_sigma2 = dof / scipy.stats.chi2.ppf(QUANTILE, dof)
+    return samples.mean(axis=1), (residual**2).sum(axis=1) / dof * to_sigma2
 
 
 def estimate_noise(mosaic: np.ndarray, pattern: str, pitch, origin=(0, 0), bins: int = 16) -> NoiseEstimate:
@@ -90,14 +101,14 @@ def estimate_noise(mosaic: np.ndarray, pattern: str, pitch, origin=(0, 0), bins:
         inside = (means >= lo) & (means <= hi)
         if inside.sum() >= 8:
             centres.append(np.median(means[inside]))
-            medians.append(np.median(variances[inside]))
+            medians.append(np.quantile(variances[inside], QUANTILE))
     if len(centres) >= 2:
         gain, floor = np.polyfit(centres, medians, 1)
     else:
-        gain, floor = 0.0, float(np.median(variances))
+        gain, floor = 0.0, float(np.quantile(variances, QUANTILE))
     gain, floor = max(float(gain), 0.0), max(float(floor), 0.0)
     if gain == 0.0 and floor == 0.0:
-        floor = float(np.median(variances))
+        floor = float(np.quantile(variances, QUANTILE))
     level = float(np.mean(mosaic))
     return NoiseEstimate(gain, floor, math.sqrt(max(gain * level + floor, 0.0)), "raw")
 

@@ -89,3 +89,51 @@ def main(argv=None):
 
 if __name__ == "__main__":
     main()
+
+
+def rule_outcome(curves: dict, factor: str, change_per_sigma: float, max_iter: int, sigma: float):
+    """(PSNR centre, PSNR mean, iterations) of "lam = factor*sigma, stop at rms change <= d*sigma".
+
+    d = 0 means: run exactly ``max_iter`` iterations.
+    """
+    curve = curves[factor]
+    last = min(max_iter, len(curve["psnr_center"]))
+    k = last
+    if change_per_sigma > 0:
+        for i in range(1, last):  # the first iteration never moves x (see params.stop_reason)
+            if curve["rms_change"][i] <= change_per_sigma * sigma:
+                k = i + 1
+                break
+    return curve["psnr_center"][k - 1], curve["psnr_mean"][k - 1], k
+
+
+def summarise(results: list[dict], method: str, change_grid=(0.05, 0.1, 0.13, 0.2, 0.3, 0.5),
+              iteration_grid=(5, 10, 15, 20, 30, 45, 60)) -> list[dict]:
+    """Score every candidate rule over all (scene, lux) of ``method``; best rules first.
+
+    A rule's score is its worst centre-view gain over Malvar across the settings
+    (ties broken by the average gain); rules that lose more than 0.3 dB on the mean
+    image somewhere rank after all others.
+    """
+    entries = [r for r in results if r["method"] == method]
+    factors = list(entries[0]["curves"])
+    rules = [(f, d, max(iteration_grid)) for f in factors for d in change_grid]
+    rules += [(f, 0.0, k) for f in factors for k in iteration_grid]
+    scored = []
+    for factor, change, limit in rules:
+        gains_c, gains_m, iters = [], [], []
+        for e in entries:
+            c, m, k = rule_outcome(e["curves"], factor, change, limit, e["sigma"])
+            gains_c.append(c - e["malvar"]["psnr_center"])
+            gains_m.append(m - e["malvar"]["psnr_mean"])
+            iters.append(k)
+        scored.append({"lam_per_sigma": float(factor), "change_per_sigma": change, "max_iter": limit,
+                       "worst_gain_center": min(gains_c), "mean_gain_center": float(np.mean(gains_c)),
+                       "worst_gain_mean": min(gains_m), "mean_gain_mean": float(np.mean(gains_m)),
+                       "iterations": iters,
+                       "settings": [f"{e['scene']}@{e['lux']:g}" for e in entries],
+                       "gains_center": gains_c, "gains_mean": gains_m})
+    # Rules that lose more than 0.3 dB on the mean image anywhere rank last.
+    scored.sort(key=lambda r: (r["worst_gain_mean"] >= -0.3, r["worst_gain_center"], r["mean_gain_center"]),
+                reverse=True)
+    return scored

@@ -119,46 +119,35 @@ class Reductions:
         self._host = np.empty(2 * self.work_items, np.float32)
         self._partial = cl.Buffer(runtime.context, cl.mem_flags.WRITE_ONLY, self._host.nbytes)
 
-    def _finish(self, kernel: str, *args) -> float:
+    def _reduce(self, kernel: str, *arrays) -> float:
+        """Run a ``*_partials`` kernel over same-shaped float32 arrays; finish in float64."""
+        for name, array in zip("xy", arrays):
+            check_device_array(array, arrays[0].shape, name)
+        if arrays[0].size == 0:
+            return 0.0
         self.runtime.launch(
-            "reduce", kernel, (self.work_items,), *args, self.interleaved, self._partial
+            "reduce", kernel, (self.work_items,), *(a.data for a in arrays), np.uint64(arrays[0].size),
+            self.interleaved, self._partial,
         )
         cl.enqueue_copy(self.runtime.queue, self._host, self._partial, is_blocking=True)
         return math.fsum(self._host.tolist())
 
     def dot(self, x, y) -> float:
         """<x, y> = sum x_i y_i (x, y: float32 device arrays of one shape)."""
-        check_device_array(x, x.shape, "x")
-        check_device_array(y, x.shape, "y")
-        if x.size == 0:
-            return 0.0
-        return self._finish("dot_partials", x.data, y.data, np.uint64(x.size))
+        return self._reduce("dot_partials", x, y)
 
     def norm2(self, x) -> float:
         """||x||^2 = sum x_i^2, the squared 2-norm."""
-        check_device_array(x, x.shape, "x")
-        if x.size == 0:
-            return 0.0
-        return self._finish("norm2_partials", x.data, np.uint64(x.size))
+        return self._reduce("norm2_partials", x)
 
     def diff_norm2(self, x, y) -> float:
         """||x - y||^2 without a temporary (x, y: float32 device arrays of one shape)."""
-        check_device_array(x, x.shape, "x")
-        check_device_array(y, x.shape, "y")
-        if x.size == 0:
-            return 0.0
-        return self._finish("diff_norm2_partials", x.data, y.data, np.uint64(x.size))
+        return self._reduce("diff_norm2_partials", x, y)
 
     def abs_sum(self, x) -> float:
         """sum |x_i|, the l1 norm."""
-        check_device_array(x, x.shape, "x")
-        if x.size == 0:
-            return 0.0
-        return self._finish("abs_sum_partials", x.data, np.uint64(x.size))
+        return self._reduce("abs_sum_partials", x)
 
     def sum(self, x) -> float:
         """sum x_i."""
-        check_device_array(x, x.shape, "x")
-        if x.size == 0:
-            return 0.0
-        return self._finish("sum_partials", x.data, np.uint64(x.size))
+        return self._reduce("sum_partials", x)
