@@ -43,3 +43,54 @@ __kernel void jacobi_apply(__global const float *r, __global float *z,
     // A sample with no measurement and no neighbour (1x1 lens, one dim) has a zero row.
     z[i] = diagonal > 0.0f ? r[i] / diagonal : 0.0f;
 }
+
+// The x-update's right-hand side in one pass: rhs = A^T b + rho D^T (z - u).
+// z and u hold one block of 3 planes per chosen dim (u, v, s, t order).
+__kernel void build_rhs(__global const float *b, __global const float *z, __global const float *u,
+                        __global float *rhs,
+                        const int height, const int width, const int U, const int V,
+                        const int dims, const int pattern, const float rho)
+{
+    const int col = get_global_id(0), row = get_global_id(1), c = get_global_id(2);
+    if (col >= width || row >= height) return;
+    const size_t pixel = (size_t)row * width + col;
+    const size_t n = (size_t)3 * height * width;
+    const size_t i = (size_t)c * height * width + pixel;
+    float divergence = 0.0f;  // D^T (z - u), a negative divergence
+    size_t block = 0;
+    for (int d = 1; d <= DIM_T; d <<= 1) {
+        if (!(dims & d)) continue;
+        const size_t k = block * n + i;
+        if (has_prev(d, row, col, U, V)) {
+            const size_t back = k - step_of(d, width, U, V);
+            divergence += z[back] - u[back];
+        }
+        if (has_next(d, row, col, height, width, U, V)) divergence -= z[k] - u[k];
+        ++block;
+    }
+    const float measured = bayer_colour(row, col, pattern) == c ? b[pixel] : 0.0f;
+    rhs[i] = measured + rho * divergence;
+}
+
+// Exact x-update for a (u, v)-only prior: A^T A + rho D_uv^T D_uv is block diagonal,
+// one U*V x U*V block per lens and colour, and the block depends only on the colour
+// and the Bayer parity of the lens's first pixel. `inverse` holds the 4 x 3 inverted
+// blocks ((parity * 3 + c) * UV + i) * UV + j, parity = 2 * ((s*U) & 1) + ((t*V) & 1).
+//   x[lens, c, i] = sum_j inverse[parity, c, i, j] * rhs[lens, c, j]
+__kernel void lens_solve(__global const float *rhs, __global float *x, __global const float *inverse,
+                         const int height, const int width, const int U, const int V)
+{
+    const int col = get_global_id(0), row = get_global_id(1), c = get_global_id(2);
+    if (col >= width || row >= height) return;
+    const int s = row / U, t = col / V;
+    const int UV = U * V;
+    const int parity = (((s * U) & 1) << 1) | ((t * V) & 1);
+    const int i = (row - s * U) * V + (col - t * V);
+    __global const float *weights = inverse + ((size_t)(parity * 3 + c) * UV + i) * UV;
+    __global const float *lens = rhs + (size_t)c * height * width + (size_t)(s * U) * width + t * V;
+    float acc = 0.0f;
+    for (int du = 0; du < U; ++du)
+        for (int dv = 0; dv < V; ++dv)
+            acc += weights[du * V + dv] * lens[(size_t)du * width + dv];
+    x[(size_t)c * height * width + (size_t)row * width + col] = acc;
+}

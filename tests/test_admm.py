@@ -29,7 +29,7 @@ def smooth_lightfield_mosaic(rng, S, T, U, V, pattern="GRBG", noise=0.02):
 def test_device_matches_numpy_reference(runtime, rng, dims, pattern):
     S, T, U, V = 4, 5, 9, 9
     b, x0 = smooth_lightfield_mosaic(rng, S, T, U, V, pattern)
-    params = AdmmParams(lam=0.01, rho=0.3, max_iter=12, cg_steps=4, cg_tol=0.0)
+    params = AdmmParams(lam=0.01, rho=0.3, max_iter=12, cg_steps=4, cg_tol=0.0, x_update="cg")
     expected = admm_reference(b, pattern, (U, V), dims, params, x0)
     solver = AdmmSolver(runtime, b.shape, pattern, (U, V), dims)
     got = solver.solve(runtime.to_device(b), runtime.to_device(x0), params)
@@ -41,6 +41,29 @@ def test_device_matches_numpy_reference(runtime, rng, dims, pattern):
         assert mine.objective == pytest.approx(ref.objective, rel=1e-4)
         assert mine.primal_residual == pytest.approx(ref.primal_residual, rel=1e-3, abs=1e-6)
         assert mine.dual_residual == pytest.approx(ref.dual_residual, rel=1e-3, abs=1e-6)
+
+
+@pytest.mark.parametrize("pattern", ["RGGB", "GBRG"])
+@pytest.mark.parametrize("pitch", [(9, 9), (4, 5)])
+def test_exact_lens_solve_matches_converged_cg(runtime, rng, pattern, pitch):
+    # The per-lens inverse must give what CG gives when run to convergence.
+    U, V = pitch
+    b, x0 = smooth_lightfield_mosaic(rng, 3, 4, U, V, pattern)
+    exact = AdmmParams(lam=0.01, rho=0.3, max_iter=8, x_update="lens")
+    converged = AdmmParams(lam=0.01, rho=0.3, max_iter=8, cg_steps=400, cg_tol=1e-13)
+    expected = admm_reference(b, pattern, pitch, "uv", converged, x0)
+    solver = AdmmSolver(runtime, b.shape, pattern, pitch, "uv")
+    got = solver.solve(runtime.to_device(b), runtime.to_device(x0), exact)
+    relative = np.linalg.norm(got.x.get() - expected.x) / np.linalg.norm(expected.x)
+    assert relative <= 1e-5, relative
+    assert all(r.cg_steps == 0 for r in got.history)
+
+
+def test_lens_solve_needs_a_uv_prior(runtime, rng):
+    b, x0 = smooth_lightfield_mosaic(rng, 2, 2, 9, 9)
+    solver = AdmmSolver(runtime, b.shape, "GRBG", (9, 9), "uvst")
+    with pytest.raises(ValueError, match="needs a prior over"):
+        solver.solve(runtime.to_device(b), runtime.to_device(x0), AdmmParams(x_update="lens"))
 
 
 def test_reference_solves_the_problem_it_states(rng):

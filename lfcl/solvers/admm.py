@@ -8,7 +8,8 @@ docs/layout.md::
 with A the CFA sampling, D forward differences over the chosen dims of
 (u, v, s, t), per channel (anisotropic TV). Scaled-form ADMM with z = D x:
 
-    x <- (A^T A + rho D^T D)^{-1} (A^T b + rho D^T (z - u))   Jacobi-PCG, warm-started
+    x <- (A^T A + rho D^T D)^{-1} (A^T b + rho D^T (z - u))   Jacobi-PCG, warm-started,
+                                                               or exact per lens for (u, v)
     z <- S_{lam/rho}(D x + u)                                  soft-thresholding
     u <- u + D x - z                                           scaled dual update
 
@@ -38,14 +39,36 @@ import math
 
 import numpy as np
 
-from ..layout import dims_mask, ordered_dims, packed_pattern
+from ..layout import channel_map, dims_mask, ordered_dims, packed_pattern
 from ..ops import check_device_array
 from ..ops.cfa import CfaSampling
-from ..ops.gradient import Gradient
+from ..ops.gradient import Gradient, gradient_gram_np
 from ..ops.linalg import VectorOps
 from ..ops.reduce import Reductions
 from ..ops.shrink import Shrinkage
 from .params import AdmmParams, AdmmResult, IterationRecord, stop_reason
+
+
+def lens_block_inverses(pattern: str, origin, pitch, rho: float) -> np.ndarray:
+    """(A^T A + rho D_uv^T D_uv)^-1 restricted to one lens: [4 parities, 3 colours, UV, UV].
+
+    Parity 2*ps + pt: the Bayer parity (row, col) of the lens's first sensor pixel.
+    A colour no pixel of the lens measures still gets a well-defined (pseudo-)inverse.
+    """
+    U, V = pitch
+    UV = U * V
+    # The Laplacian of one lens, column by column from unit vectors.
+    laplacian = np.stack([
+        gradient_gram_np(np.eye(UV)[j].reshape(1, U, V), (U, V), "uv").ravel() for j in range(UV)
+    ], axis=1)
+    blocks = np.empty((4, 3, UV, UV), np.float32)
+    for ps in range(2):
+        for pt in range(2):
+            colours = channel_map((U, V), pattern, (origin[0] + ps, origin[1] + pt)).ravel()
+            for c in range(3):
+                normal = np.diag((colours == c).astype(np.float64)) + rho * laplacian
+                blocks[2 * ps + pt, c] = np.linalg.pinv(normal, hermitian=True)
+    return blocks
 
 
 class AdmmSolver:
@@ -66,12 +89,14 @@ class AdmmSolver:
         self.vectors = VectorOps(runtime)
         self.reduce = Reductions(runtime)
         self.shrink = Shrinkage(runtime)
+        self.pattern, self.origin = pattern, origin
+        self._inverse = None  # per-lens inverse blocks, built for one rho on first use
         self._normal_args = (
             np.int32(self.height), np.int32(self.width), np.int32(self.U), np.int32(self.V),
             np.int32(dims_mask(self.dims)), packed_pattern(pattern, origin),
         )
-        planes = [runtime.empty(self.planes_shape) for _ in range(8)]
-        self._x_prev, self._atb, self._rhs, self._r, self._pz, self._p, self._q, self._tmp = planes
+        planes = [runtime.empty(self.planes_shape) for _ in range(7)]
+        self._x_prev, self._rhs, self._r, self._pz, self._p, self._q, self._tmp = planes
         grads = [runtime.empty(self.D.gradient_shape) for _ in range(4)]
         self._z, self._u, self._dx, self._dz = grads
         self._mosaic = runtime.empty((self.height, self.width))
@@ -84,6 +109,21 @@ class AdmmSolver:
             *self._normal_args, np.float32(rho),
         )
         return out
+
+    def _uses_lens_solve(self, params: AdmmParams) -> bool:
+        if params.x_update == "lens" and self.dims != ("u", "v"):
+            raise ValueError(f"x_update 'lens' needs a prior over (u, v) only, not {''.join(self.dims)}")
+        return params.x_update == "lens" or (params.x_update == "auto" and self.dims == ("u", "v"))
+
+    def _lens_solve(self, rhs, x, rho):
+        """x = (A^T A + rho D_uv^T D_uv)^-1 rhs, exactly, lens by lens."""
+        if self._inverse is None or self._inverse[0] != rho:
+            blocks = lens_block_inverses(self.pattern, self.origin, (self.U, self.V), rho)
+            self._inverse = (rho, self.runtime.to_device(blocks))
+        self.runtime.launch(
+            "admm", "lens_solve", (self.width, self.height, 3), rhs.data, x.data, self._inverse[1].data,
+            np.int32(self.height), np.int32(self.width), np.int32(self.U), np.int32(self.V),
+        )
 
     def _conjugate_gradient(self, x, rhs, rho, max_steps, tol) -> int:
         """Warm-started PCG on x in place; returns the steps taken."""
@@ -120,18 +160,22 @@ class AdmmSolver:
         rho, lam = params.rho, params.lam
         vec, red, D = self.vectors, self.reduce, self.D
         x = x0.copy()
-        self.A.adjoint(b, out=self._atb)
+        exact = self._uses_lens_solve(params)
         D.forward(x, out=self._z)
         self._u.fill(0)
         n_x, n_z = x.size, self._z.size
         history: list[IterationRecord] = []
         while True:
             vec.copy(x, self._x_prev)
-            # rhs = A^T b + rho D^T (z - u)
-            vec.axpby(1.0, self._z, -1.0, self._u, self._dz)
-            D.adjoint(self._dz, out=self._rhs)
-            vec.axpby(1.0, self._atb, rho, self._rhs, self._rhs)
-            steps = self._conjugate_gradient(x, self._rhs, rho, params.cg_steps, params.cg_tol)
+            self.runtime.launch(  # rhs = A^T b + rho D^T (z - u)
+                "admm", "build_rhs", (self.width, self.height, 3), b.data, self._z.data, self._u.data,
+                self._rhs.data, *self._normal_args, np.float32(rho),
+            )
+            if exact:
+                self._lens_solve(self._rhs, x, rho)
+                steps = 0
+            else:
+                steps = self._conjugate_gradient(x, self._rhs, rho, params.cg_steps, params.cg_tol)
             D.forward(x, out=self._dx)
             self.shrink.zu_update(self._dx, self._z, self._u, self._dz, params.kappa)
             primal = math.sqrt(red.diff_norm2(self._dx, self._z))

@@ -21,6 +21,9 @@ class AdmmParams:
                 (0 disables it).
     change_tol: stop when rms(x_k - x_{k-1}) <= change_tol (0 disables it); the early
                 stop that the noise-matched defaults use (docs/admm.md).
+    x_update:   "auto" (exact per-lens solve when the prior is over (u, v) only, else CG),
+                "cg" (always conjugate gradients) or "lens" (exact; (u, v) only). The
+                numpy reference always uses CG.
     """
 
     lam: float = 0.01
@@ -31,6 +34,7 @@ class AdmmParams:
     abs_tol: float = 0.0
     rel_tol: float = 0.0
     change_tol: float = 0.0
+    x_update: str = "auto"
 
     def __post_init__(self):
         for name in ("lam", "rho", "cg_tol", "abs_tol", "rel_tol", "change_tol"):
@@ -39,6 +43,8 @@ class AdmmParams:
                 raise ValueError(f"ADMM parameter {name} must be a finite number >= 0, got {value!r}")
         if self.rho <= 0:
             raise ValueError(f"ADMM parameter rho must be > 0, got {self.rho!r}")
+        if self.x_update not in ("auto", "cg", "lens"):
+            raise ValueError(f"ADMM parameter x_update must be 'auto', 'cg' or 'lens', got {self.x_update!r}")
         for name in ("max_iter", "cg_steps"):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or value < 1:
@@ -58,7 +64,7 @@ class IterationRecord:
     primal_residual: float  # ||D x - z||
     dual_residual: float  # rho ||D^T (z - z_prev)||
     rms_change: float  # rms(x_k - x_{k-1})
-    cg_steps: int
+    cg_steps: int  # CG steps of the x-update (0: exact per-lens solve)
 
 
 @dataclasses.dataclass
