@@ -29,7 +29,7 @@ from ..solvers.admm import AdmmSolver
 from ..solvers.params import AdmmParams
 
 
-def sweep_capture(capture, method: str, lam_factors, max_iter: int, runtime) -> dict:
+def sweep_capture(capture, method: str, lam_factors, max_iter: int, runtime, rho: float | None = None) -> dict:
     """PSNR/rms-change curves of ``method`` on one capture for each lambda factor."""
     defaults = ADMM_DEFAULTS[method]
     sigma = from_noise_profile(capture.noise_profile, capture.mosaic).sigma
@@ -48,10 +48,11 @@ def sweep_capture(capture, method: str, lam_factors, max_iter: int, runtime) -> 
             psnr_m.append(scores["psnr_mean"])
             change.append(rec.rms_change)
 
-        params = AdmmParams(lam=factor * sigma, rho=defaults.rho, max_iter=max_iter, cg_steps=defaults.cg_steps)
+        params = AdmmParams(lam=factor * sigma, rho=rho or defaults.rho, max_iter=max_iter, cg_steps=defaults.cg_steps)
         solver.solve(b, x0, params, callback=record)
         curves[f"{factor:g}"] = {"psnr_center": psnr_c, "psnr_mean": psnr_m, "rms_change": change}
-    return {"sigma": sigma, "malvar": lightfield_scores(start, capture.truth), "curves": curves}
+    return {"sigma": sigma, "rho": rho or defaults.rho, "malvar": lightfield_scores(start, capture.truth),
+            "curves": curves}
 
 
 def main(argv=None):
@@ -64,6 +65,7 @@ def main(argv=None):
     parser.add_argument("--lam-factors", default="0.01,0.03,0.1,0.3,1,3")
     parser.add_argument("--max-iter", type=int, default=60)
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--rhos", default="", help="rho values to try (default: each method's default)")
     args = parser.parse_args(argv)
     runtime = get_runtime()
     lenses = [int(n) for n in args.lenses.split("x")]
@@ -74,13 +76,14 @@ def main(argv=None):
             meta = {"scene": {"kind": "scene", "name": scene}, "lenses": lenses, "pitch": [9, 9],
                     "pattern": "GRBG", "seed": args.seed}
             capture = capture_in_memory(meta, lux)
-            for method in args.methods.split(","):
+            runs = [(m, float(r) if r else None) for m in args.methods.split(",") for r in args.rhos.split(",")]
+            for method, rho in runs:
                 start = time.perf_counter()
-                entry = sweep_capture(capture, method, factors, args.max_iter, runtime)
+                entry = sweep_capture(capture, method, factors, args.max_iter, runtime, rho)
                 entry.update(scene=scene, lux=lux, method=method, seconds=time.perf_counter() - start)
                 results.append(entry)
                 best = max((max(c["psnr_center"]), f) for f, c in entry["curves"].items())
-                print(f"{scene:10s} {lux:5g} lux {method:10s} sigma {entry['sigma']:.4f} "
+                print(f"{scene:10s} {lux:5g} lux {method:10s} rho {entry['rho']:g} sigma {entry['sigma']:.4f} "
                       f"malvar {entry['malvar']['psnr_center']:.2f} best centre {best[0]:.2f} at c={best[1]} "
                       f"({entry['seconds']:.0f} s)", flush=True)
                 with open(args.output, "w") as f:
@@ -107,7 +110,7 @@ def rule_outcome(curves: dict, factor: str, change_per_sigma: float, max_iter: i
     return curve["psnr_center"][k - 1], curve["psnr_mean"][k - 1], k
 
 
-def summarise(results: list[dict], method: str, change_grid=(0.05, 0.1, 0.13, 0.2, 0.3, 0.5),
+def summarise(results: list[dict], method: str, rho: float | None = None, change_grid=(0.05, 0.1, 0.13, 0.2, 0.3, 0.5),
               iteration_grid=(5, 10, 15, 20, 30, 45, 60)) -> list[dict]:
     """Score every candidate rule over all (scene, lux) of ``method``; best rules first.
 
@@ -115,7 +118,7 @@ def summarise(results: list[dict], method: str, change_grid=(0.05, 0.1, 0.13, 0.
     (ties broken by the average gain); rules that lose more than 0.3 dB on the mean
     image somewhere rank after all others.
     """
-    entries = [r for r in results if r["method"] == method]
+    entries = [r for r in results if r["method"] == method and (rho is None or r.get("rho") == rho)]
     factors = list(entries[0]["curves"])
     rules = [(f, d, max(iteration_grid)) for f in factors for d in change_grid]
     rules += [(f, 0.0, k) for f in factors for k in iteration_grid]

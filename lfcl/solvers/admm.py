@@ -95,8 +95,9 @@ class AdmmSolver:
             np.int32(self.height), np.int32(self.width), np.int32(self.U), np.int32(self.V),
             np.int32(dims_mask(self.dims)), packed_pattern(pattern, origin),
         )
-        planes = [runtime.empty(self.planes_shape) for _ in range(7)]
-        self._x_prev, self._rhs, self._r, self._pz, self._p, self._q, self._tmp = planes
+        planes = [runtime.empty(self.planes_shape) for _ in range(3)]
+        self._x_prev, self._rhs, self._tmp = planes
+        self._cg_buffers = None  # r, P r, p, q: only the CG x-update needs them
         grads = [runtime.empty(self.D.gradient_shape) for _ in range(4)]
         self._z, self._u, self._dx, self._dz = grads
         self._mosaic = runtime.empty((self.height, self.width))
@@ -128,7 +129,9 @@ class AdmmSolver:
     def _conjugate_gradient(self, x, rhs, rho, max_steps, tol) -> int:
         """Warm-started PCG on x in place; returns the steps taken."""
         vec, red = self.vectors, self.reduce
-        r, pz, p, q = self._r, self._pz, self._p, self._q
+        if self._cg_buffers is None:
+            self._cg_buffers = [self.runtime.empty(self.planes_shape) for _ in range(4)]
+        r, pz, p, q = self._cg_buffers
         self._launch("normal_apply", x, q, rho)
         vec.axpby(1.0, rhs, -1.0, q, r)  # r = rhs - M x
         self._launch("jacobi_apply", r, pz, rho)
