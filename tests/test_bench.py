@@ -1,0 +1,119 @@
+"""`lfcl bench kernels|pareto|admm` through the CLI: the structure of their JSON, never their speed."""
+
+from __future__ import annotations
+
+import json
+import math
+from types import SimpleNamespace
+
+import pytest
+from click.testing import CliRunner
+
+from lfcl.cli import cli
+
+KERNELS = [
+    "copy (reference)", "CFA A", "CFA A^T", "CFA A^T A", "Malvar",
+    "D uv", "D^T uv", "D^T D uv", "normal_apply uv", "jacobi_apply uv", "build_rhs uv", "lens_solve uv",
+    "D uvst", "D^T uvst", "D^T D uvst", "normal_apply uvst", "jacobi_apply uvst", "build_rhs uvst",
+    "dot", "norm2", "diff_norm2", "abs_sum", "soft_threshold", "zu_update", "axpby",
+]
+
+
+def _invoke(args):
+    return CliRunner().invoke(cli, args)
+
+
+def test_bench_kernels_json():
+    result = _invoke(["bench", "kernels", "--size", "90x90", "--repeats", "2", "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert report["device"] and report["size"] == [90, 90] and report["lenses"] == [10, 10]
+    assert report["elements"] == {"N": 8100, "P": 24300}
+    assert [k["name"] for k in report["kernels"]] == KERNELS
+    copy = report["kernels"][0]
+    assert copy["bytes"] == 2 * report["light_field_bytes"]
+    assert report["copy_gb_per_s"] == pytest.approx(copy["gb_per_s"])
+    for k in report["kernels"]:
+        assert len(k["times"]) == 2 and all(t > 0 for t in k["times"]), k["name"]
+        assert k["seconds"] > 0 and k["bytes"] > 0 and k["traffic"] and k["kernel"]
+        assert k["gb_per_s"] == pytest.approx(k["bytes"] / k["seconds"] / 1e9, rel=1e-9), k["name"]
+        assert k["copy_fraction"] == pytest.approx(k["gb_per_s"] / copy["gb_per_s"], rel=1e-9)
+        assert k["numpy_seconds"] > 0 and k["speedup"] == pytest.approx(k["numpy_seconds"] / k["seconds"])
+    # the documented minimum traffic, 4 bytes per float
+    by_name = {k["name"]: k for k in report["kernels"]}
+    N, P = 8100, 24300
+    assert by_name["CFA A"]["bytes"] == 4 * 2 * N
+    assert by_name["D uvst"]["bytes"] == 4 * 5 * P
+    assert by_name["zu_update"]["bytes"] == 4 * 6 * P
+    assert by_name["norm2"]["bytes"] == 4 * P
+
+
+def test_bench_kernels_table_and_errors():
+    result = _invoke(["bench", "kernels", "--size", "18x18", "--repeats", "1", "--numpy-repeats", "0", "--only", "axpby"])
+    assert result.exit_code == 0, result.output
+    assert "axpby" in result.stdout and "copy (reference)" in result.stdout and "zu_update" not in result.stdout
+    result = _invoke(["bench", "kernels", "--size", "90x91"])
+    assert result.exit_code == 1 and "9x9 microlenses" in result.stderr
+    result = _invoke(["bench", "kernels", "--size", "big"])
+    assert result.exit_code == 1 and "--size" in result.stderr
+
+
+def test_kernels_memory_check_names_the_limit(runtime):
+    from lfcl.bench import kernels
+
+    cases = kernels.build_cases(runtime, 4500, 4500, (9, 9))
+    specs = kernels.buffer_specs(4500, 4500)
+    small = SimpleNamespace(device=SimpleNamespace(name="tiny", max_mem_alloc_size=2**28, global_mem_size=2**40))
+    with pytest.raises(ValueError, match="allocates at most 256 MiB"):
+        kernels._check_memory(small, specs, cases, (4500, 4500))
+    small.device.max_mem_alloc_size, small.device.global_mem_size = 2**40, 2**30
+    with pytest.raises(ValueError, match="MiB of device memory at once"):
+        kernels._check_memory(small, specs, cases, (4500, 4500))
+
+
+def test_bench_pareto_json(tmp_path):
+    out = tmp_path / "pareto"
+    result = _invoke(["bench", "pareto", "--lenses", "8x8", "--budgets", "1,2", "--json", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert report["lenses"] == [8, 8] and report["budgets"] == [1, 2] and report["reference_budgets"] == [1, 2]
+    points = report["points"]
+    methods = [(p["method"], p["iterations"]) for p in points]
+    assert methods == [("malvar", 0), ("admm-uv", 1), ("admm-uv", 2), ("admm-st", 1), ("admm-st", 2),
+                       ("admm-uvst", 1), ("admm-uvst", 2), ("colour-demosaicing Malvar2004", 0),
+                       ("numpy reference admm-uv (CG)", 1), ("numpy reference admm-uv (CG)", 2)]
+    for p in points:
+        assert p["seconds"] > 0 and math.isfinite(p["psnr_center"]) and math.isfinite(p["psnr_mean"]), p
+        assert isinstance(p["front"], bool)
+    assert any(p["front"] for p in points)
+    # from the Malvar start the first x-update changes nothing, whatever solves it
+    dev = {p["iterations"]: p for p in points if p["method"] == "admm-uv"}
+    ref = {p["iterations"]: p for p in points if p["method"] == "numpy reference admm-uv (CG)"}
+    assert dev[1]["psnr_center"] == pytest.approx(ref[1]["psnr_center"], abs=0.01)
+    assert (out / "pareto.png").stat().st_size > 0
+    assert json.loads((out / "pareto.json").read_text())["points"] == points
+    assert "admm-uvst" in (out / "pareto.md").read_text()
+    assert sorted(p.name for p in out.iterdir()) == ["pareto.json", "pareto.md", "pareto.png"]
+
+
+def test_bench_pareto_without_colour_demosaicing(monkeypatch, tmp_path):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "colour_demosaicing", None)  # import raises ImportError
+    result = _invoke(["bench", "pareto", "--lenses", "8x8", "--budgets", "1", "-o", str(tmp_path / "p")])
+    assert result.exit_code == 1
+    assert "pip install 'lfcl[test]'" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "p").exists()
+
+
+def test_bench_admm_json():
+    result = _invoke(["bench", "admm", "--lenses", "8x8", "--iterations", "2", "--repeats", "1",
+                      "--methods", "admm-uv", "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    (row,) = report["methods"]
+    assert row["method"] == "admm-uv" and row["device_iterations"] == 2 and row["reference_iterations"] == 2
+    assert row["device_cg_steps"] == [4, 4]  # like the reference: CG, whatever the solver's default
+    assert row["default_per_iteration"] > 0 and row["default_x_update"]
+    assert row["device_per_iteration"] > 0 and row["reference_per_iteration"] > 0
+    assert row["max_abs_diff"] < 1e-3
