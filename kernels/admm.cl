@@ -8,8 +8,7 @@
 // Global size: (W, H, 3).
 
 __kernel void normal_apply(__global const float *x, __global float *y,
-                           const int height, const int width, const int U, const int V,
-                           const int dims, const int pattern, const float rho)
+                           const int height, const int width, const int dims, const int pattern, const float rho)
 {
     const int col = get_global_id(0), row = get_global_id(1), c = get_global_id(2);
     if (col >= width || row >= height) return;
@@ -18,9 +17,9 @@ __kernel void normal_apply(__global const float *x, __global float *y,
     float laplacian = 0.0f;
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(dims & d)) continue;
-        const size_t step = step_of(d, width, U, V);
-        if (has_next(d, row, col, height, width, U, V)) laplacian += xi - x[i + step];
-        if (has_prev(d, row, col, U, V)) laplacian += xi - x[i - step];
+        const size_t step = step_of(d, width);
+        if (has_next(d, row, col, height, width)) laplacian += xi - x[i + step];
+        if (has_prev(d, row, col)) laplacian += xi - x[i - step];
     }
     const float measured = bayer_colour(row, col, pattern) == c ? xi : 0.0f;
     y[i] = measured + rho * laplacian;
@@ -28,8 +27,7 @@ __kernel void normal_apply(__global const float *x, __global float *y,
 
 // z = r / diag(M): diag(A^T A) is the 0/1 mask, diag(D^T D) the neighbour count.
 __kernel void jacobi_apply(__global const float *r, __global float *z,
-                           const int height, const int width, const int U, const int V,
-                           const int dims, const int pattern, const float rho)
+                           const int height, const int width, const int dims, const int pattern, const float rho)
 {
     const int col = get_global_id(0), row = get_global_id(1), c = get_global_id(2);
     if (col >= width || row >= height) return;
@@ -37,7 +35,7 @@ __kernel void jacobi_apply(__global const float *r, __global float *z,
     int neighbours = 0;
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(dims & d)) continue;
-        neighbours += has_next(d, row, col, height, width, U, V) + has_prev(d, row, col, U, V);
+        neighbours += has_next(d, row, col, height, width) + has_prev(d, row, col);
     }
     const float diagonal = (bayer_colour(row, col, pattern) == c ? 1.0f : 0.0f) + rho * neighbours;
     // A sample with no measurement and no neighbour (1x1 lens, one dim) has a zero row.
@@ -48,8 +46,8 @@ __kernel void jacobi_apply(__global const float *r, __global float *z,
 // z and u hold one block of 3 planes per chosen dim (u, v, s, t order).
 __kernel void build_rhs(__global const float *b, __global const float *z, __global const float *u,
                         __global float *rhs,
-                        const int height, const int width, const int U, const int V,
-                        const int dims, const int pattern, const float rho)
+                        const int height, const int width, const int dims, const int pattern,
+                        const float rho)
 {
     const int col = get_global_id(0), row = get_global_id(1), c = get_global_id(2);
     if (col >= width || row >= height) return;
@@ -61,11 +59,11 @@ __kernel void build_rhs(__global const float *b, __global const float *z, __glob
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(dims & d)) continue;
         const size_t k = block * n + i;
-        if (has_prev(d, row, col, U, V)) {
-            const size_t back = k - step_of(d, width, U, V);
+        if (has_prev(d, row, col)) {
+            const size_t back = k - step_of(d, width);
             divergence += z[back] - u[back];
         }
-        if (has_next(d, row, col, height, width, U, V)) divergence -= z[k] - u[k];
+        if (has_next(d, row, col, height, width)) divergence -= z[k] - u[k];
         ++block;
     }
     const float measured = bayer_colour(row, col, pattern) == c ? b[pixel] : 0.0f;
@@ -73,24 +71,31 @@ __kernel void build_rhs(__global const float *b, __global const float *z, __glob
 }
 
 // Exact x-update for a (u, v)-only prior: A^T A + rho D_uv^T D_uv is block diagonal,
-// one U*V x U*V block per lens and colour, and the block depends only on the colour
-// and the Bayer parity of the lens's first pixel. `inverse` holds the 4 x 3 inverted
-// blocks ((parity * 3 + c) * UV + i) * UV + j, parity = 2 * ((s*U) & 1) + ((t*V) & 1).
+// one UV x UV block per lens and colour (UV = PITCH_U * PITCH_V), and the block depends
+// only on the colour and the Bayer parity of the lens's first pixel. `inverse` holds
+// the 4 x 3 inverted blocks, ((parity * 3 + c) * UV + i) * UV + j with
+// parity = 2 * ((s*U) & 1) + ((t*V) & 1), i and j = u * V + v inside the lens:
+//
 //   x[lens, c, i] = sum_j inverse[parity, c, i, j] * rhs[lens, c, j]
+//
+// Global size: (T, S * UV, 3). Neighbouring work-items are neighbouring lenses with
+// the same output sample i, so they read the same row of weights.
+#define UV (PITCH_U * PITCH_V)
+
 __kernel void lens_solve(__global const float *rhs, __global float *x, __global const float *inverse,
-                         const int height, const int width, const int U, const int V)
+                         const int height, const int width)
 {
-    const int col = get_global_id(0), row = get_global_id(1), c = get_global_id(2);
-    if (col >= width || row >= height) return;
-    const int s = row / U, t = col / V;
-    const int UV = U * V;
-    const int parity = (((s * U) & 1) << 1) | ((t * V) & 1);
-    const int i = (row - s * U) * V + (col - t * V);
+    const int t = get_global_id(0), si = get_global_id(1), c = get_global_id(2);
+    if (t >= width / PITCH_V || si >= (height / PITCH_U) * UV) return;
+    const int s = si / UV, i = si % UV;
+    const int parity = (((s * PITCH_U) & 1) << 1) | ((t * PITCH_V) & 1);
     __global const float *weights = inverse + ((size_t)(parity * 3 + c) * UV + i) * UV;
-    __global const float *lens = rhs + (size_t)c * height * width + (size_t)(s * U) * width + t * V;
+    const size_t plane = (size_t)c * height * width;
+    __global const float *lens = rhs + plane + (size_t)(s * PITCH_U) * width + t * PITCH_V;
     float acc = 0.0f;
-    for (int du = 0; du < U; ++du)
-        for (int dv = 0; dv < V; ++dv)
-            acc += weights[du * V + dv] * lens[(size_t)du * width + dv];
-    x[(size_t)c * height * width + (size_t)row * width + col] = acc;
+    for (int du = 0; du < PITCH_U; ++du)
+        for (int dv = 0; dv < PITCH_V; ++dv)
+            acc += weights[du * PITCH_V + dv] * lens[(size_t)du * width + dv];
+    const int row = s * PITCH_U + i / PITCH_V, col = t * PITCH_V + i % PITCH_V;
+    x[plane + (size_t)row * width + col] = acc;
 }

@@ -13,41 +13,45 @@ inline int bayer_colour(int row, int col, int pattern)
 
 // Steps of the 4D grid on the sensor-shaped planes (row = s*U + u, col = t*V + v,
 // W = T*V): u: W, v: 1, s: U*W, t: V. Dims are bits of a mask (u=1, v=2, s=4, t=8).
+// Programs that use them are built with the lens pitch as constants (-DPITCH_U=9
+// -DPITCH_V=9), so the divisions below compile to multiplies and shifts.
 #define DIM_U 1
 #define DIM_V 2
 #define DIM_S 4
 #define DIM_T 8
 
+#ifdef PITCH_U
 // Is there a next sample along dim d from (row, col)?
-inline int has_next(int d, int row, int col, int height, int width, int U, int V)
+inline int has_next(int d, int row, int col, int height, int width)
 {
     switch (d) {
-    case DIM_U: return (row % U) < U - 1;
-    case DIM_V: return (col % V) < V - 1;
-    case DIM_S: return row / U < height / U - 1;
-    default:    return col / V < width / V - 1;
+    case DIM_U: return (row % PITCH_U) < PITCH_U - 1;
+    case DIM_V: return (col % PITCH_V) < PITCH_V - 1;
+    case DIM_S: return row / PITCH_U < height / PITCH_U - 1;
+    default:    return col / PITCH_V < width / PITCH_V - 1;
     }
 }
 
-inline int has_prev(int d, int row, int col, int U, int V)
+inline int has_prev(int d, int row, int col)
 {
     switch (d) {
-    case DIM_U: return (row % U) > 0;
-    case DIM_V: return (col % V) > 0;
-    case DIM_S: return row >= U;
-    default:    return col >= V;
+    case DIM_U: return (row % PITCH_U) > 0;
+    case DIM_V: return (col % PITCH_V) > 0;
+    case DIM_S: return row >= PITCH_U;
+    default:    return col >= PITCH_V;
     }
 }
 
-inline size_t step_of(int d, int width, int U, int V)
+inline size_t step_of(int d, int width)
 {
     switch (d) {
     case DIM_U: return (size_t)width;
     case DIM_V: return 1;
-    case DIM_S: return (size_t)U * width;
-    default:    return (size_t)V;
+    case DIM_S: return (size_t)PITCH_U * width;
+    default:    return (size_t)PITCH_V;
     }
 }
+#endif
 
 // Flat arrays are processed in chunks of 16 floats (one SIMD register on a CPU);
 // only the last chunk of n floats may be short.

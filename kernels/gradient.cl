@@ -12,7 +12,7 @@
 
 __kernel void grad_forward(__global const float *x, __global float *z,
                            const int height, const int width, const int channels,
-                           const int U, const int V, const int dims)
+                           const int dims)
 {
     const int col = get_global_id(0), row = get_global_id(1), c = get_global_id(2);
     if (col >= width || row >= height) return;
@@ -22,15 +22,15 @@ __kernel void grad_forward(__global const float *x, __global float *z,
     int block = 0;
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(dims & d)) continue;
-        z[block * n + i] = has_next(d, row, col, height, width, U, V)
-                               ? x[i + step_of(d, width, U, V)] - xi : 0.0f;
+        z[block * n + i] = has_next(d, row, col, height, width)
+                               ? x[i + step_of(d, width)] - xi : 0.0f;
         ++block;
     }
 }
 
 __kernel void grad_adjoint(__global const float *z, __global float *x,
                            const int height, const int width, const int channels,
-                           const int U, const int V, const int dims)
+                           const int dims)
 {
     const int col = get_global_id(0), row = get_global_id(1), c = get_global_id(2);
     if (col >= width || row >= height) return;
@@ -41,8 +41,8 @@ __kernel void grad_adjoint(__global const float *z, __global float *x,
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(dims & d)) continue;
         __global const float *zd = z + block * n;
-        if (has_prev(d, row, col, U, V)) acc += zd[i - step_of(d, width, U, V)];
-        if (has_next(d, row, col, height, width, U, V)) acc -= zd[i];
+        if (has_prev(d, row, col)) acc += zd[i - step_of(d, width)];
+        if (has_next(d, row, col, height, width)) acc -= zd[i];
         ++block;
     }
     x[i] = acc;
@@ -51,7 +51,7 @@ __kernel void grad_adjoint(__global const float *z, __global float *x,
 // D^T D x without the intermediate gradient: a 4D Laplacian with Neumann ends.
 __kernel void grad_gram(__global const float *x, __global float *y,
                         const int height, const int width, const int channels,
-                        const int U, const int V, const int dims)
+                        const int dims)
 {
     const int col = get_global_id(0), row = get_global_id(1), c = get_global_id(2);
     if (col >= width || row >= height) return;
@@ -60,9 +60,9 @@ __kernel void grad_gram(__global const float *x, __global float *y,
     float acc = 0.0f;
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(dims & d)) continue;
-        const size_t step = step_of(d, width, U, V);
-        if (has_next(d, row, col, height, width, U, V)) acc += xi - x[i + step];
-        if (has_prev(d, row, col, U, V)) acc += xi - x[i - step];
+        const size_t step = step_of(d, width);
+        if (has_next(d, row, col, height, width)) acc += xi - x[i + step];
+        if (has_prev(d, row, col)) acc += xi - x[i - step];
     }
     y[i] = acc;
 }

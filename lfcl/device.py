@@ -120,36 +120,42 @@ class Runtime:
         self.device = device
         self.context = cl.Context([device])
         self.queue = cl.CommandQueue(self.context)
-        self._programs: dict[str, cl.Program] = {}
-        self._kernels: dict[tuple[str, str], cl.Kernel] = {}
+        self._programs: dict[tuple, cl.Program] = {}
+        self._kernels: dict[tuple, cl.Kernel] = {}
         self._lock = threading.Lock()
 
     @property
     def name(self) -> str:
         return self.device.name.strip()
 
-    def program(self, name: str) -> cl.Program:
-        """``kernels/<name>.cl`` (after common.cl), built once for this context."""
+    def program(self, name: str, defines: tuple = ()) -> cl.Program:
+        """``kernels/<name>.cl`` (after common.cl), built once per set of ``defines``.
+
+        ``defines`` are ``(NAME, value)`` pairs passed as ``-DNAME=value``: sizes the
+        compiler should see as constants (the lens pitch).
+        """
+        key = (name, tuple(defines))
         with self._lock:
-            program = self._programs.get(name)
+            program = self._programs.get(key)
             if program is None:
                 source = kernel_source(_COMMON_SOURCE) + "\n" + kernel_source(name)
-                program = cl.Program(self.context, source).build(options=["-cl-std=CL1.2"])
-                self._programs[name] = program
+                options = ["-cl-std=CL1.2", *(f"-D{k}={int(v)}" for k, v in defines)]
+                program = cl.Program(self.context, source).build(options=options)
+                self._programs[key] = program
             return program
 
-    def kernel(self, program: str, kernel: str) -> cl.Kernel:
+    def kernel(self, program: str, kernel: str, defines: tuple = ()) -> cl.Kernel:
         """The kernel object ``kernel`` of ``program``, fetched once and reused."""
-        key = (program, kernel)
+        key = (program, kernel, tuple(defines))
         cached = self._kernels.get(key)
         if cached is None:
-            cached = getattr(self.program(program), kernel)
+            cached = getattr(self.program(program, defines), kernel)
             self._kernels[key] = cached
         return cached
 
-    def launch(self, program: str, kernel: str, global_size, *args, local_size=None) -> cl.Event:
+    def launch(self, program: str, kernel: str, global_size, *args, local_size=None, defines: tuple = ()) -> cl.Event:
         """Enqueue a kernel over ``global_size`` work-items (the kernels bound-check)."""
-        return self.kernel(program, kernel)(self.queue, tuple(global_size), local_size, *args)
+        return self.kernel(program, kernel, defines)(self.queue, tuple(global_size), local_size, *args)
 
     def empty(self, shape, dtype=np.float32):
         import pyopencl.array as cla
@@ -165,6 +171,12 @@ class Runtime:
         import pyopencl.array as cla
 
         return cla.to_device(self.queue, np.ascontiguousarray(array))
+
+
+def pitch_defines(pitch) -> tuple:
+    """Build-time constants for programs that walk the 4D grid: the lens pitch."""
+    U, V = (int(p) for p in pitch)
+    return (("PITCH_U", U), ("PITCH_V", V))
 
 
 _runtimes: dict[str, Runtime] = {}

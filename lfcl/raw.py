@@ -158,7 +158,7 @@ def _read_image_mosaic(path: Path, pattern: str | None, max_pixels: int) -> Mosa
         raise ValueError(f"cannot read image {path}: {_one_line(oiio.geterror()) or 'unknown format'}")
     try:
         spec = inp.spec()
-        width, height, nchannels = spec.width, spec.height, spec.nchannels
+        width, height = spec.width, spec.height
         fmt = spec.format
         declared_bits = spec.get_int_attribute("oiio:BitsPerSample", 0)
     finally:

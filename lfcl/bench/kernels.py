@@ -30,7 +30,6 @@ from typing import Callable
 import numpy as np
 import pyopencl as cl
 
-from ..layout import dims_mask, packed_pattern
 from ..ops.cfa import CfaSampling, cfa_adjoint_np, cfa_gram_np, cfa_sample_np
 from ..ops.gradient import Gradient, gradient_adjoint_np, gradient_gram_np, gradient_np
 from ..ops.linalg import VectorOps, axpby_np
@@ -107,15 +106,6 @@ class _Pool:
             del self.host[key]
 
 
-def _has_kernel(runtime, name: str, program: str = "admm") -> bool:
-    """Whether ``kernels/<program>.cl`` defines ``name`` (newer kernels are benchmarked when present)."""
-    try:
-        runtime.kernel(program, name)
-    except (AttributeError, cl.LogicError, cl.RuntimeError):
-        return False
-    return True
-
-
 def lens_solve_np(rhs: np.ndarray, blocks: np.ndarray, pitch) -> np.ndarray:
     """numpy twin of ``lens_solve``: x[lens, c] = inverse[parity, c] @ rhs[lens, c], lens by lens.
 
@@ -163,7 +153,6 @@ def build_cases(runtime, height: int, width: int, pitch) -> list[Case]:
     A = CfaSampling(runtime, sensor, PATTERN)
     malvar = Malvar(runtime, sensor, PATTERN)
     vec, red, shrink = VectorOps(runtime), Reductions(runtime), Shrinkage(runtime)
-    pattern = packed_pattern(PATTERN)
     U, V = pitch
 
     cases = [
@@ -181,9 +170,10 @@ def build_cases(runtime, height: int, width: int, pitch) -> list[Case]:
     ]
 
     def admm_cases(dims):
+        from ..solvers.admm import AdmmSolver, lens_block_inverses
+
         k, g, g2 = len(dims), f"g_{dims}", f"g2_{dims}"
-        args = (np.int32(height), np.int32(width), np.int32(U), np.int32(V), np.int32(dims_mask(dims)), pattern,
-                np.float32(RHO))
+        solver = AdmmSolver(runtime, (height, width), PATTERN, pitch, dims)
         inverse = {}
 
         def inverse_diagonal():  # untimed set-up of the Jacobi twin, as in admm_reference
@@ -192,37 +182,22 @@ def build_cases(runtime, height: int, width: int, pitch) -> list[Case]:
                 inverse["d"] = np.divide(1.0, diagonal, out=np.zeros_like(diagonal), where=diagonal > 0).astype(np.float32)
             return inverse["d"]
 
-        def launch(kernel):
-            return lambda d: runtime.launch("admm", kernel, (width, height, 3), d["x"].data, d["y"].data, *args)
-
         cases = [
             Case(f"normal_apply {dims}", "admm.cl:normal_apply", "read P + write P", 2 * P, ("x", "y"),
-                 launch("normal_apply"),
+                 lambda d: solver.normal(d["x"], d["y"], RHO),
                  lambda h: cfa_gram_np(h["x"], PATTERN) + RHO * gradient_gram_np(h["x"], pitch, dims)),
             Case(f"jacobi_apply {dims}", "admm.cl:jacobi_apply", "read P + write P", 2 * P, ("x", "y"),
-                 launch("jacobi_apply"), lambda h: h["x"] * inverse_diagonal()),
+                 lambda d: solver.precondition(d["x"], d["y"], RHO), lambda h: h["x"] * inverse_diagonal()),
+            Case(f"build_rhs {dims}", "admm.cl:build_rhs", f"read N + {2 * k}P + write P", N + (2 * k + 1) * P,
+                 ("b", g, g2, "y"),
+                 lambda d: solver.right_hand_side(d["b"], d[g], d[g2], d["y"], RHO),
+                 lambda h: cfa_adjoint_np(h["b"], PATTERN) + RHO * gradient_adjoint_np(h[g] - h[g2], pitch, dims)),
         ]
-        if _has_kernel(runtime, "build_rhs"):
-            cases.append(Case(
-                f"build_rhs {dims}", "admm.cl:build_rhs", f"read N + {2 * k}P + write P", N + (2 * k + 1) * P,
-                ("b", g, g2, "y"),
-                lambda d: runtime.launch("admm", "build_rhs", (width, height, 3), d["b"].data, d[g].data,
-                                         d[g2].data, d["y"].data, *args),
-                lambda h: cfa_adjoint_np(h["b"], PATTERN) + RHO * gradient_adjoint_np(h[g] - h[g2], pitch, dims)))
-        if dims == "uv" and _has_kernel(runtime, "lens_solve"):
-            from ..solvers.admm import lens_block_inverses
-
+        if dims == "uv":
             blocks = lens_block_inverses(PATTERN, (0, 0), (U, V), RHO)
-            device_blocks = {}
-
-            def lens_solve(d):
-                if "blocks" not in device_blocks:
-                    device_blocks["blocks"] = runtime.to_device(blocks)
-                runtime.launch("admm", "lens_solve", (width, height, 3), d["x"].data, d["y"].data,
-                               device_blocks["blocks"].data, np.int32(height), np.int32(width), np.int32(U), np.int32(V))
-
             cases.append(Case("lens_solve uv", "admm.cl:lens_solve", "read P + write P", 2 * P, ("x", "y"),
-                              lens_solve, lambda h: lens_solve_np(h["x"], blocks, (U, V))))
+                              lambda d: solver.lens_solve(d["x"], d["y"], RHO),
+                              lambda h: lens_solve_np(h["x"], blocks, (U, V))))
         return cases
 
     for dims in DIM_SETS:

@@ -28,7 +28,6 @@ of iterations with a fixed CG step count (``cg_tol = 0``), divided by the iterat
 from __future__ import annotations
 
 import dataclasses
-import time
 from pathlib import Path
 
 import numpy as np

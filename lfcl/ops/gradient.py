@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..device import pitch_defines
 from ..layout import dims_mask, ordered_dims
 from . import check_device_array, output
 
@@ -89,8 +90,8 @@ class Gradient:
     def _run(self, kernel, src, out):
         self.runtime.launch(
             "gradient", kernel, (self.width, self.height, self.channels), src.data, out.data,
-            np.int32(self.height), np.int32(self.width), np.int32(self.channels),
-            np.int32(self.U), np.int32(self.V), self.mask,
+            np.int32(self.height), np.int32(self.width), np.int32(self.channels), self.mask,
+            defines=pitch_defines((self.U, self.V)),
         )
         return out
 
