@@ -4,98 +4,107 @@
 //
 // A^T A keeps each pixel's own colour (a 0/1 mask); D^T D is the 4D Laplacian with
 // Neumann ends over the chosen dims. Both are fused into one pass so CG reads x once.
-// has_next, has_prev and step_of come from common.cl.
-// Global size: (W, H, 3).
+// The row-run helpers (load_row, neighbour, has_neighbour, laplacian) are in common.cl.
+// The stencil kernels handle 16 columns of one row each: global size (ceil(W / 16), H, 3).
 
 __kernel void normal_apply(__global const float *x, __global float *y,
-                           const int height, const int width, const int dims, const int pattern, const float rho)
+                           const int height, const int width, const int pattern, const float rho)
 {
-    const int col = get_global_id(0), row = get_global_id(1), c = get_global_id(2);
-    if (col >= width || row >= height) return;
-    const size_t i = ((size_t)c * height + row) * width + col;
-    const float xi = x[i];
-    float laplacian = 0.0f;
-    for (int d = 1; d <= DIM_T; d <<= 1) {
-        if (!(dims & d)) continue;
-        const size_t step = step_of(d, width);
-        if (has_next(d, row, col, height, width)) laplacian += xi - x[i + step];
-        if (has_prev(d, row, col)) laplacian += xi - x[i - step];
-    }
-    const float measured = bayer_colour(row, col, pattern) == c ? xi : 0.0f;
-    y[i] = measured + rho * laplacian;
+    const int col0 = 16 * get_global_id(0), row = get_global_id(1), c = get_global_id(2);
+    if (col0 >= width || row >= height) return;
+    const size_t plane_size = (size_t)height * width;
+    __global const float *plane = x + c * plane_size;
+    const float16 xi = load_row(plane + (size_t)row * width, col0, 0, width);
+    const float16 measured = select((float16)0.0f, xi, measured_lanes(row, lane_columns(col0), pattern, c));
+    store_row(measured + rho * laplacian(plane, xi, row, col0, height, width),
+              y + c * plane_size + (size_t)row * width, col0, width);
 }
 
 // z = r / diag(M): diag(A^T A) is the 0/1 mask, diag(D^T D) the neighbour count.
 __kernel void jacobi_apply(__global const float *r, __global float *z,
-                           const int height, const int width, const int dims, const int pattern, const float rho)
+                           const int height, const int width, const int pattern, const float rho)
 {
-    const int col = get_global_id(0), row = get_global_id(1), c = get_global_id(2);
-    if (col >= width || row >= height) return;
-    const size_t i = ((size_t)c * height + row) * width + col;
-    int neighbours = 0;
+    const int col0 = 16 * get_global_id(0), row = get_global_id(1), c = get_global_id(2);
+    if (col0 >= width || row >= height) return;
+    const size_t offset = c * (size_t)height * width + (size_t)row * width;
+    const int16 cols = lane_columns(col0);
+    float16 diagonal = select((float16)0.0f, (float16)1.0f, measured_lanes(row, cols, pattern, c));
     for (int d = 1; d <= DIM_T; d <<= 1) {
-        if (!(dims & d)) continue;
-        neighbours += has_next(d, row, col, height, width) + has_prev(d, row, col);
+        if (!(DIMS & d)) continue;
+        for (int dir = -1; dir <= 1; dir += 2)
+            diagonal += select((float16)0.0f, (float16)rho, has_neighbour(d, dir, row, cols, height, width));
     }
-    const float diagonal = (bayer_colour(row, col, pattern) == c ? 1.0f : 0.0f) + rho * neighbours;
     // A sample with no measurement and no neighbour (1x1 lens, one dim) has a zero row.
-    z[i] = diagonal > 0.0f ? r[i] / diagonal : 0.0f;
+    const float16 ri = load_row(r + offset, col0, 0, width);
+    store_row(select((float16)0.0f, ri / diagonal, diagonal > 0.0f), z + offset, col0, width);
 }
 
 // The x-update's right-hand side in one pass: rhs = A^T b + rho D^T (z - u).
 // z and u hold one block of 3 planes per chosen dim (u, v, s, t order).
 __kernel void build_rhs(__global const float *b, __global const float *z, __global const float *u,
-                        __global float *rhs,
-                        const int height, const int width, const int dims, const int pattern,
+                        __global float *rhs, const int height, const int width, const int pattern,
                         const float rho)
 {
-    const int col = get_global_id(0), row = get_global_id(1), c = get_global_id(2);
-    if (col >= width || row >= height) return;
-    const size_t pixel = (size_t)row * width + col;
-    const size_t n = (size_t)3 * height * width;
-    const size_t i = (size_t)c * height * width + pixel;
-    float divergence = 0.0f;  // D^T (z - u), a negative divergence
-    size_t block = 0;
+    const int col0 = 16 * get_global_id(0), row = get_global_id(1), c = get_global_id(2);
+    if (col0 >= width || row >= height) return;
+    const size_t plane_size = (size_t)height * width;
+    const int16 cols = lane_columns(col0);
+    float16 divergence = (float16)0.0f;  // D^T (z - u), a negative divergence
+    int block = 0;
     for (int d = 1; d <= DIM_T; d <<= 1) {
-        if (!(dims & d)) continue;
-        const size_t k = block * n + i;
-        if (has_prev(d, row, col)) {
-            const size_t back = k - step_of(d, width);
-            divergence += z[back] - u[back];
-        }
-        if (has_next(d, row, col, height, width)) divergence -= z[k] - u[k];
+        if (!(DIMS & d)) continue;
+        const size_t at = (block * 3 + c) * plane_size;
+        const float16 previous = neighbour(z + at, d, -1, row, col0, height, width)
+                               - neighbour(u + at, d, -1, row, col0, height, width);
+        const float16 own = load_row(z + at + (size_t)row * width, col0, 0, width)
+                          - load_row(u + at + (size_t)row * width, col0, 0, width);
+        divergence += select((float16)0.0f, previous, has_neighbour(d, -1, row, cols, height, width));
+        divergence -= select((float16)0.0f, own, has_neighbour(d, +1, row, cols, height, width));
         ++block;
     }
-    const float measured = bayer_colour(row, col, pattern) == c ? b[pixel] : 0.0f;
-    rhs[i] = measured + rho * divergence;
+    const float16 raw = load_row(b + (size_t)row * width, col0, 0, width);
+    const float16 measured = select((float16)0.0f, raw, measured_lanes(row, cols, pattern, c));
+    store_row(measured + rho * divergence, rhs + c * plane_size + (size_t)row * width, col0, width);
 }
 
 // Exact x-update for a (u, v)-only prior: A^T A + rho D_uv^T D_uv is block diagonal,
 // one UV x UV block per lens and colour (UV = PITCH_U * PITCH_V), and the block depends
-// only on the colour and the Bayer parity of the lens's first pixel. `inverse` holds
-// the 4 x 3 inverted blocks, ((parity * 3 + c) * UV + i) * UV + j with
-// parity = 2 * ((s*U) & 1) + ((t*V) & 1), i and j = u * V + v inside the lens:
+// only on the colour and the Bayer parity of the lens's first pixel,
+// parity = 2 * ((s*U) & 1) + ((t*V) & 1). With i, j = u * V + v inside the lens:
 //
 //   x[lens, c, i] = sum_j inverse[parity, c, i, j] * rhs[lens, c, j]
 //
-// Global size: (T, S * UV, 3). Neighbouring work-items are neighbouring lenses with
-// the same output sample i, so they read the same row of weights.
+// One work-item per lens and colour computes all UV outputs, 16 at a time: the host
+// stores each block transposed and padded, weights[(parity * 3 + c)][j][i], i padded
+// to UV_PAD, so that column j of the block is BLOCKS float16 loads.
+// Global size: (T, S, 3).
 #define UV (PITCH_U * PITCH_V)
+#define UV_PAD (((UV + 15) / 16) * 16)
+#define BLOCKS (UV_PAD / 16)
 
-__kernel void lens_solve(__global const float *rhs, __global float *x, __global const float *inverse,
+__kernel void lens_solve(__global const float *rhs, __global float *x, __global const float *weights,
                          const int height, const int width)
 {
-    const int t = get_global_id(0), si = get_global_id(1), c = get_global_id(2);
-    if (t >= width / PITCH_V || si >= (height / PITCH_U) * UV) return;
-    const int s = si / UV, i = si % UV;
+    const int t = get_global_id(0), s = get_global_id(1), c = get_global_id(2);
+    if (t >= width / PITCH_V || s >= height / PITCH_U) return;
     const int parity = (((s * PITCH_U) & 1) << 1) | ((t * PITCH_V) & 1);
-    __global const float *weights = inverse + ((size_t)(parity * 3 + c) * UV + i) * UV;
-    const size_t plane = (size_t)c * height * width;
-    __global const float *lens = rhs + plane + (size_t)(s * PITCH_U) * width + t * PITCH_V;
-    float acc = 0.0f;
-    for (int du = 0; du < PITCH_U; ++du)
-        for (int dv = 0; dv < PITCH_V; ++dv)
-            acc += weights[du * PITCH_V + dv] * lens[(size_t)du * width + dv];
-    const int row = s * PITCH_U + i / PITCH_V, col = t * PITCH_V + i % PITCH_V;
-    x[plane + (size_t)row * width + col] = acc;
+    __global const float *block = weights + (size_t)(parity * 3 + c) * UV * UV_PAD;
+    const size_t origin = (size_t)c * height * width + (size_t)(s * PITCH_U) * width + t * PITCH_V;
+    float16 acc[BLOCKS];
+    for (int b = 0; b < BLOCKS; ++b)
+        acc[b] = (float16)0.0f;
+    for (int u = 0; u < PITCH_U; ++u) {
+        for (int v = 0; v < PITCH_V; ++v) {
+            const float16 r = (float16)rhs[origin + (size_t)u * width + v];
+            __global const float *column = block + (u * PITCH_V + v) * UV_PAD;
+            for (int b = 0; b < BLOCKS; ++b)
+                acc[b] = fma(vload16(b, column), r, acc[b]);
+        }
+    }
+    float out[UV_PAD];
+    for (int b = 0; b < BLOCKS; ++b)
+        vstore16(acc[b], b, out);
+    for (int u = 0; u < PITCH_U; ++u)
+        for (int v = 0; v < PITCH_V; ++v)
+            x[origin + (size_t)u * width + v] = out[u * PITCH_V + v];
 }

@@ -13,43 +13,97 @@ inline int bayer_colour(int row, int col, int pattern)
 
 // Steps of the 4D grid on the sensor-shaped planes (row = s*U + u, col = t*V + v,
 // W = T*V): u: W, v: 1, s: U*W, t: V. Dims are bits of a mask (u=1, v=2, s=4, t=8).
-// Programs that use them are built with the lens pitch as constants (-DPITCH_U=9
-// -DPITCH_V=9), so the divisions below compile to multiplies and shifts.
+// Programs that use them are built with the lens pitch and the chosen dims as
+// constants (-DPITCH_U=9 -DPITCH_V=9 -DDIMS=3): the divisions below compile to
+// multiplies and shifts, and the loops over dims unroll to the dims in use.
 #define DIM_U 1
 #define DIM_V 2
 #define DIM_S 4
 #define DIM_T 8
 
 #ifdef PITCH_U
-// Is there a next sample along dim d from (row, col)?
-inline int has_next(int d, int row, int col, int height, int width)
+// The stencil kernels work on runs of 16 neighbouring samples of one plane row
+// (columns col0 .. col0+15, one SIMD register on a CPU): a step along u or s moves
+// to another row, a step along v or t stays in the row, and "is there a neighbour"
+// is one lane mask per dim.
+
+// row[col0 + offset + k] for k = 0..15, zero where the column is outside [0, width).
+inline float16 load_row(__global const float *row, int col0, int offset, int width)
+{
+    const int first = col0 + offset;
+    if (first >= 0 && first + 16 <= width)
+        return vload16(0, row + first);
+    float lane[16];
+    for (int k = 0; k < 16; ++k)
+        lane[k] = first + k >= 0 && first + k < width ? row[first + k] : 0.0f;
+    return vload16(0, lane);
+}
+
+// row[col0 + k] = v[k] for the lanes inside the row.
+inline void store_row(float16 v, __global float *row, int col0, int width)
+{
+    if (col0 + 16 <= width) {
+        vstore16(v, 0, row + col0);
+        return;
+    }
+    float lane[16];
+    vstore16(v, 0, lane);
+    for (int k = 0; col0 + k < width; ++k)
+        row[col0 + k] = lane[k];
+}
+
+// Lanes whose sensor pixel measured colour c (the CFA mask, A^T A).
+inline int16 measured_lanes(int row, int16 cols, int pattern, int c)
+{
+    const int16 cell = (int16)((row & 1) << 1) | (cols & 1);
+    return (((int16)pattern >> (2 * cell)) & 3) == c;
+}
+
+inline int16 lane_columns(int col0)
+{
+    return col0 + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+}
+
+// Lanes (all ones) that have a neighbour one step along dim d in direction dir (+1: next,
+// -1: previous): the Neumann boundary. Rows split as s*U + u, columns as t*V + v.
+inline int16 has_neighbour(int d, int dir, int row, int16 cols, int height, int width)
 {
     switch (d) {
-    case DIM_U: return (row % PITCH_U) < PITCH_U - 1;
-    case DIM_V: return (col % PITCH_V) < PITCH_V - 1;
-    case DIM_S: return row / PITCH_U < height / PITCH_U - 1;
-    default:    return col / PITCH_V < width / PITCH_V - 1;
+    case DIM_U: return (int16)(-(dir > 0 ? row % PITCH_U < PITCH_U - 1 : row % PITCH_U > 0));
+    case DIM_V: return dir > 0 ? cols % PITCH_V < PITCH_V - 1 : cols % PITCH_V > 0;
+    case DIM_S: return (int16)(-(dir > 0 ? row / PITCH_U < height / PITCH_U - 1 : row >= PITCH_U));
+    default:    return dir > 0 ? cols < width - PITCH_V : cols >= PITCH_V;
     }
 }
 
-inline int has_prev(int d, int row, int col)
+// The 16 samples one step along dim d (direction dir) from row, col0 .. col0+15 of
+// `plane`; zero off the plane (has_neighbour masks the rest).
+inline float16 neighbour(__global const float *plane, int d, int dir, int row, int col0, int height, int width)
 {
+    int r = row, offset = 0;
     switch (d) {
-    case DIM_U: return (row % PITCH_U) > 0;
-    case DIM_V: return (col % PITCH_V) > 0;
-    case DIM_S: return row >= PITCH_U;
-    default:    return col >= PITCH_V;
+    case DIM_U: r += dir; break;
+    case DIM_S: r += dir * PITCH_U; break;
+    case DIM_V: offset = dir; break;
+    default:    offset = dir * PITCH_V; break;
     }
+    if (r < 0 || r >= height) return (float16)0.0f;
+    return load_row(plane + (size_t)r * width, col0, offset, width);
 }
-
-inline size_t step_of(int d, int width)
+// D^T D x without the intermediate gradient: a 4D Laplacian with Neumann ends,
+//   (D^T D x)[i] = sum_d [has next] (x[i] - x[next]) + [has previous] (x[i] - x[previous]).
+inline float16 laplacian(__global const float *plane, float16 xi, int row, int col0, int height, int width)
 {
-    switch (d) {
-    case DIM_U: return (size_t)width;
-    case DIM_V: return 1;
-    case DIM_S: return (size_t)PITCH_U * width;
-    default:    return (size_t)PITCH_V;
+    const int16 cols = lane_columns(col0);
+    float16 acc = (float16)0.0f;
+    for (int d = 1; d <= DIM_T; d <<= 1) {
+        if (!(DIMS & d)) continue;
+        for (int dir = -1; dir <= 1; dir += 2) {
+            const float16 other = neighbour(plane, d, dir, row, col0, height, width);
+            acc += select((float16)0.0f, xi - other, has_neighbour(d, dir, row, cols, height, width));
+        }
     }
+    return acc;
 }
 #endif
 

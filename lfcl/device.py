@@ -173,10 +173,10 @@ class Runtime:
         return cla.to_device(self.queue, np.ascontiguousarray(array))
 
 
-def pitch_defines(pitch) -> tuple:
-    """Build-time constants for programs that walk the 4D grid: the lens pitch."""
+def grid_defines(pitch, dims_mask: int) -> tuple:
+    """Build-time constants for programs that walk the 4D grid: lens pitch and dims mask."""
     U, V = (int(p) for p in pitch)
-    return (("PITCH_U", U), ("PITCH_V", V))
+    return (("PITCH_U", U), ("PITCH_V", V), ("DIMS", int(dims_mask)))
 
 
 _runtimes: dict[str, Runtime] = {}

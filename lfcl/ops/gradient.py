@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..device import pitch_defines
+from ..device import grid_defines
 from ..layout import dims_mask, ordered_dims
 from . import check_device_array, output
 
@@ -89,9 +89,9 @@ class Gradient:
 
     def _run(self, kernel, src, out):
         self.runtime.launch(
-            "gradient", kernel, (self.width, self.height, self.channels), src.data, out.data,
-            np.int32(self.height), np.int32(self.width), np.int32(self.channels), self.mask,
-            defines=pitch_defines((self.U, self.V)),
+            "gradient", kernel, ((self.width + 15) // 16, self.height, self.channels), src.data, out.data,
+            np.int32(self.height), np.int32(self.width), np.int32(self.channels),
+            defines=grid_defines((self.U, self.V), self.mask),
         )
         return out
 

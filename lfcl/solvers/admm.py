@@ -39,7 +39,7 @@ import math
 
 import numpy as np
 
-from ..device import pitch_defines
+from ..device import grid_defines
 from ..layout import channel_map, dims_mask, ordered_dims, packed_pattern
 from ..ops import check_device_array
 from ..ops.cfa import CfaSampling
@@ -92,10 +92,9 @@ class AdmmSolver:
         self.shrink = Shrinkage(runtime)
         self.pattern, self.origin = pattern, origin
         self._inverse = None  # per-lens inverse blocks, built for one rho on first use
-        self._normal_args = (
-            np.int32(self.height), np.int32(self.width), np.int32(dims_mask(self.dims)), packed_pattern(pattern, origin),
-        )
-        self._defines = pitch_defines(pitch)
+        self._normal_args = (np.int32(self.height), np.int32(self.width), packed_pattern(pattern, origin))
+        self._defines = grid_defines(pitch, dims_mask(self.dims))
+        self._row_runs = ((self.width + 15) // 16, self.height, 3)  # stencils: 16 columns a work-item
         planes = [runtime.empty(self.planes_shape) for _ in range(3)]
         self._x_prev, self._rhs, self._tmp = planes
         self._cg_buffers = None  # r, P r, p, q: only the CG x-update needs them
@@ -118,14 +117,14 @@ class AdmmSolver:
     def right_hand_side(self, b, z, u, out, rho):
         """out = A^T b + rho D^T (z - u)."""
         self.runtime.launch(
-            "admm", "build_rhs", (self.width, self.height, 3), b.data, z.data, u.data, out.data,
+            "admm", "build_rhs", self._row_runs, b.data, z.data, u.data, out.data,
             *self._normal_args, np.float32(rho), defines=self._defines,
         )
         return out
 
     def _launch(self, kernel, src, out, rho):
         self.runtime.launch(
-            "admm", kernel, (self.width, self.height, 3), src.data, out.data,
+            "admm", kernel, self._row_runs, src.data, out.data,
             *self._normal_args, np.float32(rho), defines=self._defines,
         )
         return out
@@ -139,9 +138,13 @@ class AdmmSolver:
         """x = (A^T A + rho D_uv^T D_uv)^-1 rhs, exactly, lens by lens."""
         if self._inverse is None or self._inverse[0] != rho:
             blocks = lens_block_inverses(self.pattern, self.origin, (self.U, self.V), rho)
-            self._inverse = (rho, self.runtime.to_device(blocks))
+            # the kernel reads block columns as float16 runs: transpose, pad i to 16
+            UV = self.U * self.V
+            padded = np.zeros((4, 3, UV, -(-UV // 16) * 16), np.float32)
+            padded[..., :UV] = blocks.transpose(0, 1, 3, 2)
+            self._inverse = (rho, self.runtime.to_device(padded))
         self.runtime.launch(
-            "admm", "lens_solve", (self.width // self.V, (self.height // self.U) * self.U * self.V, 3),
+            "admm", "lens_solve", (self.width // self.V, self.height // self.U, 3),
             rhs.data, x.data, self._inverse[1].data, np.int32(self.height), np.int32(self.width),
             defines=self._defines,
         )
