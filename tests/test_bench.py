@@ -113,7 +113,9 @@ def test_bench_admm_json():
     report = json.loads(result.stdout)
     (row,) = report["methods"]
     assert row["method"] == "admm-uv" and row["device_iterations"] == 2 and row["reference_iterations"] == 2
-    assert row["device_cg_steps"] == [4, 4]  # like the reference: CG, whatever the solver's default
+    # CG like the reference, whatever the solver's default. The first x-update starts at the
+    # Malvar solution, whose residual is zero in exact arithmetic: 0 steps or all 4.
+    assert row["device_cg_steps"][0] in (0, 4) and row["device_cg_steps"][1:] == [4]
     assert row["default_per_iteration"] > 0 and row["default_x_update"]
     assert row["device_per_iteration"] > 0 and row["reference_per_iteration"] > 0
     assert row["max_abs_diff"] < 1e-3
