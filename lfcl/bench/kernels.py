@@ -168,6 +168,14 @@ def build_cases(runtime, height: int, width: int, pitch) -> list[Case]:
         Case("Malvar", "malvar.cl:malvar", "read N + write 3N", 4 * N, ("b", "y"),
              lambda d: malvar.forward(d["b"], out=d["y"]), lambda h: malvar_np(h["b"], PATTERN)),
     ]
+    try:  # the published peer, where installed (lfcl[test])
+        from colour_demosaicing import demosaicing_CFA_Bayer_Malvar2004
+    except ImportError:
+        demosaicing_CFA_Bayer_Malvar2004 = None
+    if demosaicing_CFA_Bayer_Malvar2004 is not None:
+        cases.append(Case("Malvar vs colour-demosaicing", "malvar.cl:malvar", "read N + write 3N", 4 * N, ("b", "y"),
+                          lambda d: malvar.forward(d["b"], out=d["y"]),
+                          lambda h: demosaicing_CFA_Bayer_Malvar2004(h["b"], PATTERN)))
 
     def admm_cases(dims):
         from ..solvers.admm import AdmmSolver, lens_block_inverses
