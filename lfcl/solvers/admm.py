@@ -35,6 +35,7 @@ Example::
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -50,25 +51,37 @@ from ..ops.shrink import Shrinkage
 from .params import AdmmParams, AdmmResult, IterationRecord, stop_reason
 
 
+@functools.lru_cache(maxsize=8)
+def _lens_laplacian(pitch) -> np.ndarray:
+    """D_uv^T D_uv of one lens as a UV x UV matrix, column by column from unit vectors."""
+    U, V = pitch
+    eye = np.eye(U * V)
+    return np.stack([gradient_gram_np(eye[j].reshape(1, U, V), (U, V), "uv").ravel() for j in range(U * V)], axis=1)
+
+
+@functools.lru_cache(maxsize=16)
 def lens_block_inverses(pattern: str, origin, pitch, rho: float) -> np.ndarray:
     """(A^T A + rho D_uv^T D_uv)^-1 restricted to one lens: [4 parities, 3 colours, UV, UV].
 
-    Parity 2*ps + pt: the Bayer parity (row, col) of the lens's first sensor pixel.
-    A colour no pixel of the lens measures still gets a well-defined (pseudo-)inverse.
+    Parity 2*ps + pt: the Bayer parity (row, col) of the lens's first sensor pixel. A
+    block is symmetric positive definite when the lens has a pixel of that colour; a
+    colour no pixel of the lens measures (a 1-pixel lens) gets the pseudo-inverse.
+    Cached: every solver of the same camera and rho shares them (read-only).
     """
     U, V = pitch
-    UV = U * V
-    # The Laplacian of one lens, column by column from unit vectors.
-    laplacian = np.stack([
-        gradient_gram_np(np.eye(UV)[j].reshape(1, U, V), (U, V), "uv").ravel() for j in range(UV)
-    ], axis=1)
-    blocks = np.empty((4, 3, UV, UV), np.float32)
+    laplacian = _lens_laplacian((U, V))
+    blocks = np.empty((4, 3, U * V, U * V), np.float32)
     for ps in range(2):
         for pt in range(2):
             colours = channel_map((U, V), pattern, (origin[0] + ps, origin[1] + pt)).ravel()
             for c in range(3):
                 normal = np.diag((colours == c).astype(np.float64)) + rho * laplacian
-                blocks[2 * ps + pt, c] = np.linalg.pinv(normal, hermitian=True)
+                try:
+                    inverse = np.linalg.inv(normal) if (colours == c).any() else np.linalg.pinv(normal)
+                except np.linalg.LinAlgError:
+                    inverse = np.linalg.pinv(normal, hermitian=True)
+                blocks[2 * ps + pt, c] = inverse
+    blocks.setflags(write=False)
     return blocks
 
 
@@ -137,7 +150,7 @@ class AdmmSolver:
     def lens_solve(self, rhs, x, rho):
         """x = (A^T A + rho D_uv^T D_uv)^-1 rhs, exactly, lens by lens."""
         if self._inverse is None or self._inverse[0] != rho:
-            blocks = lens_block_inverses(self.pattern, self.origin, (self.U, self.V), rho)
+            blocks = lens_block_inverses(self.pattern, tuple(o % 2 for o in self.origin), (self.U, self.V), float(rho))
             # the kernel reads block columns as float16 runs: transpose, pad i to 16
             UV = self.U * self.V
             padded = np.zeros((4, 3, UV, -(-UV // 16) * 16), np.float32)
