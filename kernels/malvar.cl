@@ -96,11 +96,19 @@ __kernel void malvar(__global const float *mosaic, __global float *planes,
     const int col = get_global_id(0), row = get_global_id(1);
     if (col >= width || row >= height) return;
 
-    // Mirrored row / column indices for offsets -2 .. +2 (index 2 is the centre).
+    // Row / column indices for offsets -2 .. +2 (index 2 is the centre); only the
+    // 2-pixel frame needs the mirror (integer divisions are slow on a CPU).
     int r[5], c[5];
-    for (int k = 0; k < 5; ++k) {
-        r[k] = mirror_index(row + k - 2, height) * width;
-        c[k] = mirror_index(col + k - 2, width);
+    if (row >= 2 && row + 2 < height && col >= 2 && col + 2 < width) {
+        for (int k = 0; k < 5; ++k) {
+            r[k] = (row + k - 2) * width;
+            c[k] = col + k - 2;
+        }
+    } else {
+        for (int k = 0; k < 5; ++k) {
+            r[k] = mirror_index(row + k - 2, height) * width;
+            c[k] = mirror_index(col + k - 2, width);
+        }
     }
 #define AT(dr, dc) mosaic[r[2 + (dr)] + c[2 + (dc)]]
     neighbourhood p;
