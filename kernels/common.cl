@@ -21,7 +21,6 @@ inline int bayer_colour(int row, int col, int pattern)
 #define DIM_S 4
 #define DIM_T 8
 
-#ifdef PITCH_U
 // The stencil kernels work on runs of 16 neighbouring samples of one plane row
 // (columns col0 .. col0+15, one SIMD register on a CPU): a step along u or s moves
 // to another row, a step along v or t stays in the row, and "is there a neighbour"
@@ -64,6 +63,7 @@ inline int16 lane_columns(int col0)
     return col0 + (int16)(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
 }
 
+#ifdef PITCH_U
 // Lanes (all ones) that have a neighbour one step along dim d in direction dir (+1: next,
 // -1: previous): the Neumann boundary. Rows split as s*U + u, columns as t*V + v.
 inline int16 has_neighbour(int d, int dir, int row, int16 cols, int height, int width)

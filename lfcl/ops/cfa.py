@@ -57,8 +57,10 @@ class CfaSampling:
         self.mosaic_shape = (self.height, self.width)
 
     def _run(self, kernel, src, out):
+        # cfa_sample works on runs of 16 columns, the others per pixel
+        columns = (self.width + 15) // 16 if kernel == "cfa_sample" else self.width
         self.runtime.launch(
-            "cfa", kernel, (self.width, self.height), src.data, out.data,
+            "cfa", kernel, (columns, self.height), src.data, out.data,
             np.int32(self.height), np.int32(self.width), self.pattern,
         )
         return out
