@@ -28,13 +28,26 @@ from . import user_errors
 @click.option("--exposure", default="1/90", show_default=True, metavar="SECONDS", help="Exposure time, s.")
 @click.option("--vignetting/--no-vignetting", default=False, show_default=True,
               help="Microlens cos^4 falloff in raw and white images (never in the truth).")
+@click.option("--grid", default=None, metavar="square|hex",
+              help="Lens grid of any pitch/rotation/offset (with --pitch-px, --rotation, --offset): "
+                   "writes only white.dng and meta.json (the raw of such grids is not simulated yet).")
+@click.option("--pitch-px", type=float, default=None, metavar="P",
+              help="Lens pitch in pixels, any value >= 2 (white-only mode, like --grid).")
+@click.option("--rotation", type=float, default=None, metavar="DEG",
+              help="Lens grid rotation in degrees, positive clockwise on screen (white-only mode).")
+@click.option("--offset", default=None, metavar="ROW,COL",
+              help="Lens grid offset in pixels, e.g. 0.3,0.7 (white-only mode; negative: --offset=-0.3,0.7).")
 @click.option("-o", "--output", "output", required=True, type=click.Path(file_okay=False, path_type=Path),
               metavar="DIR", help="Output folder: raw.dng, white.dng, meta.json, truth.npy, truth_views.exr.")
 @user_errors
-def command(scene, texture, lightfield, lenses, pitch, pattern, lux, seed, exposure, vignetting, output):
+def command(scene, texture, lightfield, lenses, pitch, pattern, lux, seed, exposure, vignetting, grid, pitch_px,
+            rotation, offset, output):
     """Simulate a lenslet (plenoptic) camera capture with exact ground truth."""
     from ..sim import simulate, write_capture
 
+    if grid is not None or pitch_px is not None or rotation is not None or offset is not None:
+        return _white_only(lenses, pitch, pattern, seed, vignetting, grid, pitch_px, rotation, offset,
+                           texture, lightfield, output)
     if texture is not None and not texture.is_file():
         raise ValueError(f"cannot read texture {texture}: no such file")
     start = time.perf_counter()
@@ -49,4 +62,33 @@ def command(scene, texture, lightfield, lenses, pitch, pattern, lux, seed, expos
         f"wrote {output}: {S}x{T} lenses of {U}x{V} pixels, {capture.pattern}, {lux:g} lux "
         f"({capture.meta['exposure']['mean_electrons']:.0f} e- mean, noise sigma "
         f"{capture.meta['noise']['sigma_at_mean']:.4f}) in {time.perf_counter() - start:.1f} s"
+    )
+
+
+def _white_only(lenses, pitch, pattern, seed, vignetting, grid, pitch_px, rotation, offset, texture, lightfield,
+                output):
+    """``--grid/--pitch-px/--rotation/--offset``: white.dng and meta.json of a general lens grid."""
+    from ..sim.capture import simulate_white, write_white_capture
+
+    if texture is not None or lightfield is not None:
+        raise ValueError("--texture/--lightfield need the aligned grid: with --grid, --pitch-px, --rotation or "
+                         "--offset only the white image is simulated")
+    if pitch is not None and pitch_px is not None:
+        raise ValueError("give the pitch once: --pitch (aligned grid) or --pitch-px (any grid)")
+    grid = "square" if grid is None else grid.lower()
+    if grid not in ("square", "hex"):
+        raise ValueError(f"unknown lens grid {grid!r}: expected square or hex")
+    pitch_px = float(pitch if pitch_px is None and pitch is not None else 9.0 if pitch_px is None else pitch_px)
+    start = time.perf_counter()
+    capture = simulate_white(grid, pitch_px, 0.0 if rotation is None else rotation,
+                             "0,0" if offset is None else offset, lenses=lenses, pattern=pattern, seed=seed,
+                             vignetting=vignetting)
+    write_white_capture(capture, output)
+    H, W = capture.geometry.sensor_shape
+    g = capture.geometry
+    click.echo(
+        f"wrote {output}: white.dng and meta.json only ({g.grid} grid, pitch {g.pitch:g} px, rotation "
+        f"{g.rotation_deg:g} deg, offset {g.offset[0]:g},{g.offset[1]:g}; {H}x{W} sensor, "
+        f"{capture.meta['lenslet']['lenses_on_sensor']} lenses) in {time.perf_counter() - start:.1f} s; "
+        "raws of non-aligned grids are not simulated yet"
     )

@@ -15,6 +15,10 @@ black)``, i.e. expected electrons / full-well electrons, clipped at 1.0.
 :func:`write_capture` writes ``raw.dng``, ``white.dng``, ``meta.json``,
 ``truth.npy`` and ``truth_views.exr`` into a temporary sibling folder and moves
 them into place only once all were written.
+
+:func:`simulate_white` / :func:`write_white_capture`: only ``white.dng`` and
+``meta.json`` of a square or hexagonal grid of any pitch, rotation and offset
+(:class:`lfcl.sim.geometry.GridGeometry`; docs/calibration.md).
 """
 
 from __future__ import annotations
@@ -33,7 +37,7 @@ from .. import __version__
 from ..imageio import write_image, write_json, write_npy
 from ..layout import parse_pattern, tiled_views
 from .dng import write_dng
-from .geometry import LensletGeometry
+from .geometry import GridGeometry, LensletGeometry
 from .lightfield import load_lightfield
 from .planes import Plane, render_planes
 from .scenes import check_scene, scene_planes
@@ -42,6 +46,7 @@ from .sensor import SensorModel
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float64)  # Rec. 709 / sRGB Y weights
 WHITE_FRACTION = 0.8
 FILES = ("raw.dng", "white.dng", "meta.json", "truth.npy", "truth_views.exr")
+WHITE_FILES = ("white.dng", "meta.json")
 
 
 @dataclasses.dataclass
@@ -285,6 +290,142 @@ def write_capture(capture: Capture, directory) -> Path:
                 return directory
         directory.mkdir(exist_ok=True)
         for name in FILES:
+            os.replace(tmp / name, directory / name)
+        tmp.rmdir()
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return directory
+
+
+# --------------------------------------------------------------------------- white images of any grid
+
+@dataclasses.dataclass
+class WhiteCapture:
+    """A simulated white image of a square or hexagonal grid of any pitch, rotation and offset."""
+
+    white: np.ndarray  # uint16 [H, W]
+    meta: dict
+    geometry: GridGeometry
+    sensor: SensorModel
+    pattern: str
+
+    @property
+    def black_level(self) -> int:
+        return int(self.sensor.black_level_dn)
+
+    @property
+    def white_level(self) -> int:
+        return int(self.sensor.white_level_dn)
+
+
+def parse_offset(value) -> tuple[float, float]:
+    """``"0.3,0.7"`` or ``(0.3, 0.7)`` -> ``(rows, cols)`` in pixels; ``ValueError`` for anything else."""
+    if isinstance(value, str):
+        parts = value.replace(";", ",").split(",")
+        try:
+            numbers = tuple(float(p.strip()) for p in parts)
+        except ValueError:
+            raise ValueError(f"malformed --offset {value!r}: expected ROW,COL in pixels, e.g. 0.3,0.7") from None
+    else:
+        try:
+            numbers = tuple(float(v) for v in value)
+        except (TypeError, ValueError):
+            raise ValueError(f"malformed offset {value!r}: expected (rows, cols)") from None
+    if len(numbers) != 2 or not all(np.isfinite(numbers)):
+        raise ValueError(f"malformed offset {value!r}: expected two finite numbers ROW,COL")
+    return numbers
+
+
+def simulate_white(grid: str = "square", pitch: float = 9.0, rotation_deg: float = 0.0, offset=(0.0, 0.0), *,
+                   lenses=None, sensor_shape=None, pattern: str = "GRBG", seed: int = 0, level: float = WHITE_FRACTION,
+                   vignetting: bool = False, f_number: float = 2.8, main_vignetting: float = 0.0,
+                   colour_gains=None, fill: float = 0.9, edge_px: float = 0.45,
+                   sensor: SensorModel | None = None) -> WhiteCapture:
+    """A noisy white image (flat field through the camera) of a :class:`GridGeometry`.
+
+    The sensor is ``sensor_shape`` (rows, cols) or just large enough for ``lenses``
+    ``(S, T)`` lens rows and columns (default 64x64). ``level``: the response at
+    a micro-image centre (normalised). See :meth:`GridGeometry.white_expected`.
+    """
+    pattern = parse_pattern(pattern)
+    seed = int(seed)
+    if seed < 0:
+        raise ValueError(f"seed must be >= 0, got {seed}")
+    try:
+        pitch = float(pitch)
+        rotation_deg = float(rotation_deg)
+        level = float(level)
+    except (TypeError, ValueError):
+        raise ValueError("pitch, rotation and level must be numbers") from None
+    if not np.isfinite(level) or not 0 < level <= 1.5:
+        raise ValueError(f"the white level must be in (0, 1.5], got {level!r}")
+    offset = parse_offset(offset)
+    shape_kwargs = {"rotation_deg": rotation_deg, "offset": offset, "fill": fill, "edge_px": edge_px}
+    if sensor_shape is not None:
+        geometry = GridGeometry(tuple(sensor_shape), grid, pitch, **shape_kwargs)
+    else:
+        lenses = parse_lenses(lenses) if lenses is not None else (64, 64)
+        geometry = GridGeometry.from_lenses(lenses, grid, pitch, **shape_kwargs)
+    if geometry.sensor_shape[0] * geometry.sensor_shape[1] > 2**28:
+        raise ValueError(f"a {geometry.sensor_shape[0]}x{geometry.sensor_shape[1]} sensor is too large to simulate")
+    sensor = sensor if sensor is not None else SensorModel()
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x3D1E]))
+    expected = geometry.white_expected(pattern, level, vignetting=vignetting, f_number=f_number,
+                                       main_vignetting=main_vignetting, colour_gains=colour_gains)
+    white = sensor.expose(expected, rng)
+    del expected
+    s_coef, o_coef = sensor.noise_profile()
+    meta = {
+        "generator": f"lfcl {__version__} simulate",
+        "mode": "white-only",
+        "note": "non-aligned lens grid: only the white image is simulated (raws of such grids come later)",
+        "seed": seed,
+        "pattern": pattern,
+        "lenslet": geometry.as_meta(),
+        "grid": geometry.grid,
+        "pitch": geometry.pitch,
+        "rotation_deg": geometry.rotation_deg,
+        "offset": list(geometry.offset),
+        "sensor_shape": list(geometry.sensor_shape),
+        "sensor": sensor.as_meta(),
+        "black_level": int(sensor.black_level_dn),
+        "white_level": int(sensor.white_level_dn),
+        "noise": {"profile": [[s_coef, o_coef]] * 3,
+                  "variance": "S * x + O in normalised units x = (raw - black) / (white - black)"},
+        "vignetting": {"enabled": bool(vignetting), "model": "cos^4, microlens f-number", "f_number": f_number,
+                       "main_lens_corner_loss": float(main_vignetting)},
+        "white": {"file": "white.dng", "level_normalised": level,
+                  "colour_gains": None if colour_gains is None else [float(g) for g in colour_gains]},
+        "files": list(WHITE_FILES),
+    }
+    return WhiteCapture(white, meta, geometry, sensor, pattern)
+
+
+def write_white_capture(capture: WhiteCapture, directory) -> Path:
+    """Write ``white.dng`` and ``meta.json`` into ``directory`` (created if missing, files replaced), atomically."""
+    directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        raise ValueError(f"output {directory} exists and is not a folder")
+    parent = directory.absolute().parent
+    parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{directory.name}.", suffix=".tmp", dir=parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    try:
+        os.chmod(tmp, 0o777 & ~umask)
+        s, o = capture.sensor.noise_profile()
+        write_dng(tmp / "white.dng", capture.white, capture.pattern, capture.black_level, capture.white_level,
+                  [(s, o)] * 3)
+        write_json(tmp / "meta.json", capture.meta)
+        for name in WHITE_FILES:
+            os.chmod(tmp / name, 0o666 & ~umask)
+        if not directory.exists():
+            with contextlib.suppress(OSError):
+                os.rename(tmp, directory)
+                return directory
+        directory.mkdir(exist_ok=True)
+        for name in WHITE_FILES:
             os.replace(tmp / name, directory / name)
         tmp.rmdir()
     except BaseException:

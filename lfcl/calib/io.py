@@ -1,0 +1,130 @@
+"""``cal.json`` (read with validation, written atomically) and the lens-centre CSV.
+
+Every problem with a calibration file is a one-line ``ValueError`` naming the
+file and the cause; :func:`load_calibration` with ``sensor_shape`` (and
+``pattern``) also refuses a calibration made for another sensor.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..imageio import atomic_path
+from .grid import LensGrid
+from .model import FORMAT, VERSION, Calibration, WeightModel
+
+
+def calibration_to_dict(cal: Calibration) -> dict:
+    grid = cal.grid.as_dict()
+    grid["lens_rows_spacing"] = cal.grid.pitch * cal.grid.row_factor
+    grid["centre"] = ("(row, col) of lens (i, j) = origin + i*row_step + (j + (i mod 2)/2 if hex else j)*col_step; "
+                      "pixel centres at integers, row 0 at the top")
+    grid["lenses_on_sensor"] = int(cal.centres()[0].size)
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "generator": f"lfcl {__version__} calibrate",
+        "source": cal.source,
+        "sensor_shape": list(cal.sensor_shape),
+        "pattern": cal.pattern,
+        "grid": grid,
+        "weight": None if cal.weight is None else cal.weight.as_dict(),
+        "fit": cal.fit,
+    }
+
+
+def calibration_from_dict(data, name: str = "calibration") -> Calibration:
+    """Validate a ``cal.json`` document; ``ValueError`` naming ``name`` and the problem."""
+    def fail(msg):
+        raise ValueError(f"{name}: {msg}")
+
+    if not isinstance(data, dict):
+        fail("not a calibration (expected a JSON object)")
+    if data.get("format") != FORMAT:
+        fail(f"not an lfcl calibration (format {data.get('format')!r}, expected {FORMAT!r})")
+    version = data.get("version")
+    if not isinstance(version, int) or isinstance(version, bool):
+        fail(f"malformed version {version!r}")
+    if version > VERSION:
+        fail(f"calibration version {version} is newer than this lfcl understands ({VERSION}): upgrade lfcl")
+    if version < 1:
+        fail(f"unknown calibration version {version}")
+    shape = data.get("sensor_shape")
+    if (not isinstance(shape, list) or len(shape) != 2
+            or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in shape)):
+        fail(f"sensor_shape must be [rows, cols] of positive integers, got {shape!r}")
+    try:
+        grid = LensGrid.from_dict(data.get("grid"))
+    except ValueError as exc:
+        fail(f"bad grid ({exc})")
+    stated = data["grid"].get("pitch")
+    if stated is not None and (not isinstance(stated, (int, float)) or not math.isfinite(stated)
+                               or abs(stated - grid.pitch) > 1e-3 * grid.pitch):
+        fail(f"the grid's pitch {stated!r} disagrees with its steps ({grid.pitch:.4f} px)")
+    if grid.pitch < 2 or grid.pitch > max(shape):
+        fail(f"implausible lens pitch {grid.pitch:.4g} px for a {shape[0]}x{shape[1]} sensor")
+    weight = data.get("weight")
+    try:
+        weight = None if weight is None else WeightModel.from_dict(weight)
+        return Calibration(grid=grid, sensor_shape=tuple(shape), pattern=data.get("pattern"), weight=weight,
+                           fit=data.get("fit"), source=data.get("source"), version=version)
+    except ValueError as exc:
+        fail(str(exc))
+
+
+def load_calibration(path, sensor_shape=None, pattern: str | None = None) -> Calibration:
+    """Read and validate ``cal.json``; with ``sensor_shape``/``pattern``, refuse another sensor's calibration."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"calibration {str(path)!r} does not exist")
+    try:
+        data = json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    cal = calibration_from_dict(data, str(path))
+    if sensor_shape is not None:
+        cal.check(sensor_shape, pattern)
+    return cal
+
+
+_NUMBER_LIST = re.compile(r"\[\s*((?:-?[0-9][0-9.eE+-]*|null)(?:,\s*(?:-?[0-9][0-9.eE+-]*|null))*)\s*\]")
+
+
+def dumps(data) -> str:
+    """JSON with lists of numbers on one line (the weight tables stay readable and small)."""
+    text = json.dumps(data, indent=2, allow_nan=False)
+    return _NUMBER_LIST.sub(lambda m: "[" + ", ".join(p.strip() for p in m.group(1).split(",")) + "]", text) + "\n"
+
+
+def _write_text(path, text: str) -> Path:
+    """Write ``text`` atomically, with the usual file mode (the temporary file is created 0600)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+        os.chmod(tmp, 0o666 & ~umask)
+    return Path(path)
+
+
+def save_calibration(cal: Calibration, path) -> Path:
+    """Write ``cal.json`` atomically."""
+    return _write_text(path, dumps(calibration_to_dict(cal)))
+
+
+def write_centres_csv(path, rows, cols) -> Path:
+    """``row,col`` per lens centre (sensor pixels, 4 decimals) with a header line, atomically."""
+    rows, cols = np.asarray(rows, np.float64), np.asarray(cols, np.float64)
+    body = "\n".join(f"{r:.4f},{c:.4f}" for r, c in zip(rows.tolist(), cols.tolist()))
+    return _write_text(path, "row,col\n" + body + ("\n" if body else ""))
+
+
+def read_centres_csv(path) -> np.ndarray:
+    """``[N, 2]`` (row, col) from :func:`write_centres_csv` output."""
+    return np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
