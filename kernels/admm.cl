@@ -74,10 +74,12 @@ __kernel void build_rhs(__global const float *b, __global const float *z, __glob
 //
 //   x[lens, c, i] = sum_j inverse[parity, c, i, j] * rhs[lens, c, j]
 //
-// One work-item per lens and colour computes all UV outputs, 16 at a time: the host
-// stores each block transposed and padded, weights[(parity * 3 + c)][j][i], i padded
-// to UV_PAD, so that column j of the block is BLOCKS float16 loads.
-// Global size: (T, S, 3).
+// One work-item computes all UV outputs of two lenses of the same colour and Bayer
+// parity (lens t and t + 2 of a row), 16 outputs at a time: each float16 column load
+// of the weights feeds both lenses. The host stores each block transposed and padded,
+// weights[(parity * 3 + c)][j][i], i padded to UV_PAD, so that column j of the block
+// is BLOCKS float16 loads.
+// Global size: (2 * ceil(T / 4), S, 3); work-item g takes t = 4 * (g / 2) + g % 2 and t + 2.
 #define UV (PITCH_U * PITCH_V)
 #define UV_PAD (((UV + 15) / 16) * 16)
 #define BLOCKS (UV_PAD / 16)
@@ -85,26 +87,40 @@ __kernel void build_rhs(__global const float *b, __global const float *z, __glob
 __kernel void lens_solve(__global const float *rhs, __global float *x, __global const float *weights,
                          const int height, const int width)
 {
-    const int t = get_global_id(0), s = get_global_id(1), c = get_global_id(2);
-    if (t >= width / PITCH_V || s >= height / PITCH_U) return;
+    const int g = get_global_id(0), s = get_global_id(1), c = get_global_id(2);
+    const int lenses = width / PITCH_V;
+    const int t = 4 * (g / 2) + g % 2;
+    if (t >= lenses || s >= height / PITCH_U) return;
+    const bool pair = t + 2 < lenses;
     const int parity = (((s * PITCH_U) & 1) << 1) | ((t * PITCH_V) & 1);
     __global const float *block = weights + (size_t)(parity * 3 + c) * UV * UV_PAD;
-    const size_t origin = (size_t)c * height * width + (size_t)(s * PITCH_U) * width + t * PITCH_V;
-    float16 acc[BLOCKS];
+    const size_t first = (size_t)c * height * width + (size_t)(s * PITCH_U) * width + t * PITCH_V;
+    const size_t second = pair ? first + 2 * PITCH_V : first;
+    float16 acc0[BLOCKS], acc1[BLOCKS];
     for (int b = 0; b < BLOCKS; ++b)
-        acc[b] = (float16)0.0f;
+        acc0[b] = acc1[b] = (float16)0.0f;
     for (int u = 0; u < PITCH_U; ++u) {
         for (int v = 0; v < PITCH_V; ++v) {
-            const float16 r = (float16)rhs[origin + (size_t)u * width + v];
+            const size_t at = (size_t)u * width + v;
+            const float16 r0 = (float16)rhs[first + at], r1 = (float16)rhs[second + at];
             __global const float *column = block + (u * PITCH_V + v) * UV_PAD;
-            for (int b = 0; b < BLOCKS; ++b)
-                acc[b] = fma(vload16(b, column), r, acc[b]);
+            for (int b = 0; b < BLOCKS; ++b) {
+                const float16 w = vload16(b, column);
+                acc0[b] = fma(w, r0, acc0[b]);
+                acc1[b] = fma(w, r1, acc1[b]);
+            }
         }
     }
-    float out[UV_PAD];
-    for (int b = 0; b < BLOCKS; ++b)
-        vstore16(acc[b], b, out);
-    for (int u = 0; u < PITCH_U; ++u)
-        for (int v = 0; v < PITCH_V; ++v)
-            x[origin + (size_t)u * width + v] = out[u * PITCH_V + v];
+    float out0[UV_PAD], out1[UV_PAD];
+    for (int b = 0; b < BLOCKS; ++b) {
+        vstore16(acc0[b], b, out0);
+        vstore16(acc1[b], b, out1);
+    }
+    for (int u = 0; u < PITCH_U; ++u) {
+        for (int v = 0; v < PITCH_V; ++v) {
+            const size_t at = (size_t)u * width + v;
+            x[first + at] = out0[u * PITCH_V + v];
+            if (pair) x[second + at] = out1[u * PITCH_V + v];
+        }
+    }
 }

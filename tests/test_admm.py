@@ -48,7 +48,7 @@ def test_device_matches_numpy_reference(runtime, rng, dims, pattern):
 def test_exact_lens_solve_matches_converged_cg(runtime, rng, pattern, pitch):
     # The per-lens inverse must give what CG gives when run to convergence.
     U, V = pitch
-    b, x0 = smooth_lightfield_mosaic(rng, 3, 4, U, V, pattern)
+    b, x0 = smooth_lightfield_mosaic(rng, 3, 5, U, V, pattern)  # odd T: a lens without a pair
     exact = AdmmParams(lam=0.01, rho=0.3, max_iter=8, x_update="lens")
     converged = AdmmParams(lam=0.01, rho=0.3, max_iter=8, cg_steps=400, cg_tol=1e-13)
     expected = admm_reference(b, pattern, pitch, "uv", converged, x0)

@@ -104,11 +104,22 @@ def test_shapes_and_empty_arrays(runtime, reductions, rng):
 
 def test_partials_are_allocated_once(runtime, rng):
     reductions = Reductions(runtime)
-    buffer, host = reductions._partial.int_ptr, reductions._host
     dx = runtime.to_device(rng.standard_normal(1000).astype(np.float32))
+    reductions.dot(dx, dx)
+    slots = [(host, buffer.int_ptr) for host, buffer in reductions._slots]
     for _ in range(3):
         reductions.dot(dx, dx), reductions.norm2(dx), reductions.sum(dx)
-    assert reductions._partial.int_ptr == buffer and reductions._host is host
+    assert [(host, buffer.int_ptr) for host, buffer in reductions._slots] == slots
+
+
+def test_many_equals_one_at_a_time(runtime, reductions, rng):
+    x = rng.standard_normal(12345).astype(np.float32)
+    y = rng.standard_normal(12345).astype(np.float32)
+    dx, dy = runtime.to_device(x), runtime.to_device(y)
+    batched = reductions.many(("dot", dx, dy), ("norm2", dx), ("abs_sum", dy), ("diff_norm2", dx, dy))
+    assert batched == [reductions.dot(dx, dy), reductions.norm2(dx), reductions.abs_sum(dy),
+                       reductions.diff_norm2(dx, dy)]
+    assert_close(batched[3], diff_norm2_np(x, y))
 
 
 def test_bad_arguments_raise_value_error(runtime, reductions):

@@ -116,21 +116,39 @@ class Reductions:
         if interleaved is None:
             interleaved = not device.type & cl.device_type.CPU
         self.interleaved = np.int32(bool(interleaved))
-        self._host = np.empty(2 * self.work_items, np.float32)
-        self._partial = cl.Buffer(runtime.context, cl.mem_flags.WRITE_ONLY, self._host.nbytes)
+        # one (host, device) pair of partial buffers per reduction in flight
+        self._slots: list[tuple[np.ndarray, cl.Buffer]] = []
 
-    def _reduce(self, kernel: str, *arrays) -> float:
-        """Run a ``*_partials`` kernel over same-shaped float32 arrays; finish in float64."""
+    def _slot(self, index: int):
+        while len(self._slots) <= index:
+            host = np.empty(2 * self.work_items, np.float32)
+            self._slots.append((host, cl.Buffer(self.runtime.context, cl.mem_flags.WRITE_ONLY, host.nbytes)))
+        return self._slots[index]
+
+    def _enqueue(self, index: int, kernel: str, *arrays) -> bool:
+        """Launch a ``*_partials`` kernel into slot ``index``; False for empty arrays."""
         for name, array in zip("xy", arrays):
             check_device_array(array, arrays[0].shape, name)
         if arrays[0].size == 0:
-            return 0.0
+            return False
+        host, partial = self._slot(index)
         self.runtime.launch(
             "reduce", kernel, (self.work_items,), *(a.data for a in arrays), np.uint64(arrays[0].size),
-            self.interleaved, self._partial,
+            self.interleaved, partial,
         )
-        cl.enqueue_copy(self.runtime.queue, self._host, self._partial, is_blocking=True)
-        return math.fsum(self._host.tolist())
+        cl.enqueue_copy(self.runtime.queue, host, partial, is_blocking=False)
+        return True
+
+    def many(self, *requests) -> list[float]:
+        """Several reductions with one wait: ``requests`` are ``(method name, array, ...)``,
+        e.g. ``many(("norm2", x), ("dot", x, y))``. Saves a host round trip per reduction."""
+        launched = [self._enqueue(i, f"{name}_partials", *arrays) for i, (name, *arrays) in enumerate(requests)]
+        self.runtime.queue.finish()
+        return [math.fsum(self._slots[i][0].tolist()) if ok else 0.0 for i, ok in enumerate(launched)]
+
+    def _reduce(self, kernel: str, *arrays) -> float:
+        """Run one ``*_partials`` kernel over same-shaped float32 arrays; finish in float64."""
+        return self.many((kernel.removesuffix("_partials"), *arrays))[0]
 
     def dot(self, x, y) -> float:
         """<x, y> = sum x_i y_i (x, y: float32 device arrays of one shape)."""

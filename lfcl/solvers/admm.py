@@ -157,7 +157,7 @@ class AdmmSolver:
             padded[..., :UV] = blocks.transpose(0, 1, 3, 2)
             self._inverse = (rho, self.runtime.to_device(padded))
         self.runtime.launch(
-            "admm", "lens_solve", (self.width // self.V, self.height // self.U, 3),
+            "admm", "lens_solve", (2 * -(-(self.width // self.V) // 4), self.height // self.U, 3),
             rhs.data, x.data, self._inverse[1].data, np.int32(self.height), np.int32(self.width),
             defines=self._defines,
         )
@@ -214,17 +214,19 @@ class AdmmSolver:
                 steps = self._conjugate_gradient(x, self._rhs, rho, params.cg_steps, params.cg_tol)
             D.forward(x, out=self._dx)
             self.shrink.zu_update(self._dx, self._z, self._u, self._dz, params.kappa)
-            primal = math.sqrt(red.diff_norm2(self._dx, self._z))
             D.adjoint(self._dz, out=self._tmp)
-            dual = rho * math.sqrt(red.norm2(self._tmp))
             self.A.forward(x, out=self._mosaic)
-            objective = 0.5 * red.diff_norm2(self._mosaic, b) + lam * red.abs_sum(self._dx)
+            # the whole history in one round trip to the host
+            primal2, dual2, misfit2, tv, change2 = red.many(
+                ("diff_norm2", self._dx, self._z), ("norm2", self._tmp), ("diff_norm2", self._mosaic, b),
+                ("abs_sum", self._dx), ("diff_norm2", x, self._x_prev),
+            )
             record = IterationRecord(
                 iteration=len(history) + 1,
-                objective=objective,
-                primal_residual=primal,
-                dual_residual=dual,
-                rms_change=math.sqrt(red.diff_norm2(x, self._x_prev) / n_x),
+                objective=0.5 * misfit2 + lam * tv,
+                primal_residual=math.sqrt(primal2),
+                dual_residual=rho * math.sqrt(dual2),
+                rms_change=math.sqrt(change2 / n_x),
                 cg_steps=steps,
             )
             history.append(record)
