@@ -40,3 +40,14 @@ def test_unknown_extension_is_refused(tmp_path):
     with pytest.raises(ValueError, match="unsupported output extension"):
         write_image(tmp_path / "x.bmp", np.zeros((2, 2), np.float32))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_written_files_get_the_usual_permissions(tmp_path):
+    import os
+
+    umask = os.umask(0o022)
+    try:
+        path = write_image(tmp_path / "x.exr", np.zeros((2, 2, 3), np.float32))
+    finally:
+        os.umask(umask)
+    assert path.stat().st_mode & 0o777 == 0o644
