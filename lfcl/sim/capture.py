@@ -261,8 +261,9 @@ def simulate(scene: str = "charts", lenses=None, pitch: int | None = None, patte
     return Capture(raw, white, truth, meta, geometry, sensor, pattern)
 
 
-def write_capture(capture: Capture, directory) -> Path:
-    """Write a capture's files into ``directory`` (created if missing, files replaced)."""
+def _write_folder(directory, files, write) -> Path:
+    """Write ``files`` into ``directory`` all or nothing: ``write(tmp)`` fills a temporary
+    sibling folder, whose files move into ``directory`` only when every one was written."""
     directory = Path(directory)
     if directory.exists() and not directory.is_dir():
         raise ValueError(f"output {directory} exists and is not a folder")
@@ -272,7 +273,26 @@ def write_capture(capture: Capture, directory) -> Path:
     umask = os.umask(0)
     os.umask(umask)
     try:
-        os.chmod(tmp, 0o777 & ~umask)
+        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes the folder private
+        write(tmp)
+        if not directory.exists():
+            with contextlib.suppress(OSError):
+                os.rename(tmp, directory)
+                return directory
+        directory.mkdir(exist_ok=True)
+        for name in files:
+            os.replace(tmp / name, directory / name)
+        tmp.rmdir()
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return directory
+
+
+def write_capture(capture: Capture, directory) -> Path:
+    """Write a capture's files into ``directory`` (created if missing, files replaced)."""
+
+    def write(tmp: Path):
         s, o = capture.sensor.noise_profile()
         for name, mosaic in (("raw.dng", capture.raw), ("white.dng", capture.white)):
             write_dng(tmp / name, mosaic, capture.pattern, capture.black_level, capture.white_level,
@@ -282,20 +302,8 @@ def write_capture(capture: Capture, directory) -> Path:
                     {"layout": "U x V grid of S x T views", "lenses": list(capture.geometry.lenses),
                      "pitch": list(capture.geometry.pitch)})
         write_json(tmp / "meta.json", capture.meta)
-        for name in FILES:  # the temporary files were created 0600: give them the usual mode
-            os.chmod(tmp / name, 0o666 & ~umask)
-        if not directory.exists():
-            with contextlib.suppress(OSError):
-                os.rename(tmp, directory)
-                return directory
-        directory.mkdir(exist_ok=True)
-        for name in FILES:
-            os.replace(tmp / name, directory / name)
-        tmp.rmdir()
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return directory
+
+    return _write_folder(directory, FILES, write)
 
 
 # --------------------------------------------------------------------------- white images of any grid
@@ -404,31 +412,11 @@ def simulate_white(grid: str = "square", pitch: float = 9.0, rotation_deg: float
 
 def write_white_capture(capture: WhiteCapture, directory) -> Path:
     """Write ``white.dng`` and ``meta.json`` into ``directory`` (created if missing, files replaced), atomically."""
-    directory = Path(directory)
-    if directory.exists() and not directory.is_dir():
-        raise ValueError(f"output {directory} exists and is not a folder")
-    parent = directory.absolute().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{directory.name}.", suffix=".tmp", dir=parent))
-    umask = os.umask(0)
-    os.umask(umask)
-    try:
-        os.chmod(tmp, 0o777 & ~umask)
+
+    def write(tmp: Path):
         s, o = capture.sensor.noise_profile()
         write_dng(tmp / "white.dng", capture.white, capture.pattern, capture.black_level, capture.white_level,
                   [(s, o)] * 3)
         write_json(tmp / "meta.json", capture.meta)
-        for name in WHITE_FILES:
-            os.chmod(tmp / name, 0o666 & ~umask)
-        if not directory.exists():
-            with contextlib.suppress(OSError):
-                os.rename(tmp, directory)
-                return directory
-        directory.mkdir(exist_ok=True)
-        for name in WHITE_FILES:
-            os.replace(tmp / name, directory / name)
-        tmp.rmdir()
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return directory
+
+    return _write_folder(directory, WHITE_FILES, write)
