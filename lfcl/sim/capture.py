@@ -49,8 +49,20 @@ FILES = ("raw.dng", "white.dng", "meta.json", "truth.npy", "truth_views.exr")
 WHITE_FILES = ("white.dng", "meta.json")
 
 
+class _SensorLevels:
+    """Black and white levels (DN) of the simulated sensor, for writing DNGs."""
+
+    @property
+    def black_level(self) -> int:
+        return int(self.sensor.black_level_dn)
+
+    @property
+    def white_level(self) -> int:
+        return int(self.sensor.white_level_dn)
+
+
 @dataclasses.dataclass
-class Capture:
+class Capture(_SensorLevels):
     """A simulated lenslet capture: raws, ground truth and metadata."""
 
     raw: np.ndarray  # uint16 [H, W] CFA mosaic
@@ -60,14 +72,6 @@ class Capture:
     geometry: LensletGeometry
     sensor: SensorModel
     pattern: str
-
-    @property
-    def black_level(self) -> int:
-        return int(self.sensor.black_level_dn)
-
-    @property
-    def white_level(self) -> int:
-        return int(self.sensor.white_level_dn)
 
     def normalised_raw(self) -> np.ndarray:
         """``(raw - black) / (white - black)`` as float32."""
@@ -309,7 +313,7 @@ def write_capture(capture: Capture, directory) -> Path:
 # --------------------------------------------------------------------------- white images of any grid
 
 @dataclasses.dataclass
-class WhiteCapture:
+class WhiteCapture(_SensorLevels):
     """A simulated white image of a square or hexagonal grid of any pitch, rotation and offset."""
 
     white: np.ndarray  # uint16 [H, W]
@@ -317,14 +321,6 @@ class WhiteCapture:
     geometry: GridGeometry
     sensor: SensorModel
     pattern: str
-
-    @property
-    def black_level(self) -> int:
-        return int(self.sensor.black_level_dn)
-
-    @property
-    def white_level(self) -> int:
-        return int(self.sensor.white_level_dn)
 
 
 def parse_offset(value) -> tuple[float, float]:
