@@ -23,7 +23,7 @@ import numpy as np
 from .device import get_runtime
 from .noise import NoiseEstimate, estimate_noise
 from .ops.malvar import Malvar
-from .solvers.admm import AdmmSolver
+from .solvers.admm import AdmmSolver, solver_bytes, solver_largest_buffer
 from .solvers.params import AdmmParams
 
 METHODS = ("malvar", "admm-uv", "admm-st", "admm-uvst")
@@ -85,13 +85,27 @@ class DemosaicResult:
     noise: NoiseEstimate | None
 
 
+def lens_row_bands(lens_rows: int, per_row: tuple[int, int], limits: tuple[int, int]) -> list[tuple[int, int]]:
+    """Split ``lens_rows`` into bands [s0, s1) that fit the device.
+
+    per_row: (solver bytes, largest-buffer bytes) of one lens row; limits: (memory
+    budget, largest allocation) of the device.
+    """
+    per_band = max(1, min(limit // max(need, 1) for need, limit in zip(per_row, limits)))
+    return [(s0, min(s0 + per_band, lens_rows)) for s0 in range(0, lens_rows, per_band)]
+
+
 def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
                         lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
-                        device=None, callback=None) -> DemosaicResult:
+                        device=None, callback=None, max_memory: int | None = None) -> DemosaicResult:
     """Demosaic (and denoise) a normalised lenslet mosaic [H, W] into [3, H, W] planes.
 
     H and W must be whole multiples of the pitch (crop first). ``noise`` defaults to
-    an estimate from the mosaic (used by the ADMM methods only).
+    an estimate from the mosaic (used by the ADMM methods only). ``max_memory``
+    (bytes, default: 80 % of the device's global memory) bounds the solver's device
+    buffers: a larger admm-uv problem runs in bands of lens rows, which is exact
+    because the (u, v) prior couples no two lenses (each band stops on its own rule);
+    the other priors couple neighbouring lenses and say so instead.
     """
     method = parse_method(method)
     mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
@@ -112,12 +126,40 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     if noise is None:
         noise = estimate_noise(mosaic, pattern, pitch, origin)
     params = admm_params(method, noise.sigma, lam=lam, iterations=iterations, rho=rho, strength=strength)
-    solver = AdmmSolver(runtime, mosaic.shape, pattern, pitch, ADMM_DEFAULTS[method].dims, origin)
-    result = solver.solve(b, x0, params, callback=callback)
-    planes = result.x.get()
+    dims = ADMM_DEFAULTS[method].dims
+    H, W = mosaic.shape
+    budget = int(max_memory) if max_memory is not None else int(0.8 * runtime.device.global_mem_size)
+    needed = solver_bytes((H, W), dims, exact=dims == "uv")
+    largest = solver_largest_buffer((H, W), dims)
+    if needed <= budget and largest <= runtime.device.max_mem_alloc_size:
+        result = AdmmSolver(runtime, mosaic.shape, pattern, pitch, dims, origin).solve(b, x0, params, callback=callback)
+        planes, runs = result.x.get(), [result]
+    elif dims == "uv":
+        per_row = (solver_bytes((U, W), dims, exact=True), solver_largest_buffer((U, W), dims))
+        bands = lens_row_bands(H // U, per_row, (budget, runtime.device.max_mem_alloc_size))
+        x0_host = x0.get()
+        del b, x0
+        planes, runs = np.empty_like(x0_host), []
+        for s0, s1 in bands:
+            rows = slice(s0 * U, s1 * U)
+            band = AdmmSolver(runtime, (rows.stop - rows.start, W), pattern, pitch, dims, (origin[0] + rows.start, origin[1]))
+            result = band.solve(runtime.to_device(mosaic[rows]), runtime.to_device(x0_host[:, rows]), params,
+                                callback=callback)
+            planes[:, rows] = result.x.get()
+            runs.append(result)
+    else:
+        raise ValueError(
+            f"{method} on a {H}x{W} sensor needs about {needed / 2**30:.1f} GiB of device memory "
+            f"(largest buffer {largest / 2**30:.1f} GiB) but {runtime.name} allows {budget / 2**30:.1f} GiB "
+            f"(max allocation {runtime.device.max_mem_alloc_size / 2**30:.1f} GiB); its prior couples "
+            "neighbouring lenses, so it does not run in bands: use admm-uv, a crop, or a larger device"
+        )
     if not np.all(np.isfinite(planes)):
         raise FloatingPointError(f"{method} produced NaN/Inf values; try a smaller lambda or rho")
+    history = [dict(dataclasses.asdict(r), band=i) for i, run in enumerate(runs) for r in run.history]
+    reason = runs[0].stop_reason if len(runs) == 1 else f"{len(runs)} bands of lens rows, each: " + "; ".join(
+        sorted({run.stop_reason.split(" <=")[0] for run in runs}))
     return DemosaicResult(
-        planes, method, dataclasses.asdict(params), result.iterations, time.perf_counter() - start,
-        result.stop_reason, [dataclasses.asdict(r) for r in result.history], noise,
+        planes, method, dataclasses.asdict(params), max(run.iterations for run in runs), time.perf_counter() - start,
+        reason, history, noise,
     )

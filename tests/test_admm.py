@@ -123,3 +123,26 @@ def test_bad_parameters_raise():
         AdmmParams(lam=float("nan"))
     with pytest.raises(ValueError, match="max_iter must be an integer"):
         AdmmParams(max_iter=0)
+
+
+def test_admm_uv_in_bands_of_lens_rows_equals_the_whole(rng):
+    # The (u, v) prior couples no two lenses, so bands (with odd lens-row offsets,
+    # hence shifted Bayer phases) must reproduce the single solve.
+    from lfcl.methods import demosaic_lightfield
+    from lfcl.noise import NoiseEstimate
+
+    b, _ = smooth_lightfield_mosaic(rng, 7, 5, 9, 9, noise=0.03)
+    noise = NoiseEstimate(0.0, 0.03**2, 0.03, "test")
+    whole = demosaic_lightfield(b, "GRBG", (9, 9), "admm-uv", iterations=6, noise=noise)
+    bands = demosaic_lightfield(b, "GRBG", (9, 9), "admm-uv", iterations=6, noise=noise, max_memory=150_000)
+    assert "bands of lens rows" in bands.stop_reason and "bands" not in whole.stop_reason
+    assert len({h["band"] for h in bands.history}) > 2
+    np.testing.assert_allclose(bands.planes, whole.planes, rtol=0, atol=2e-6)
+
+
+def test_coupled_priors_say_why_they_cannot_run_in_bands(rng):
+    from lfcl.methods import demosaic_lightfield
+
+    b, _ = smooth_lightfield_mosaic(rng, 4, 4, 9, 9)
+    with pytest.raises(ValueError, match="couples\\s+neighbouring lenses|couples neighbouring lenses"):
+        demosaic_lightfield(b, "GRBG", (9, 9), "admm-st", iterations=2, max_memory=100_000)

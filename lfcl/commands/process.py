@@ -37,10 +37,13 @@ def _parse_outputs(text: str) -> list[str]:
 @click.option("--iterations", default=None, type=click.IntRange(min=1),
               help="Run exactly this many ADMM iterations; default: the method's early-stopping rule.")
 @click.option("--strength", default=1.0, show_default=True, type=float, help="Multiplier on the default lambda.")
+@click.option("--max-memory", default=None, type=click.FloatRange(min=0.01), metavar="GIB",
+              help="Device memory the solver may use, GiB; default 80% of the device's. A larger admm-uv "
+                   "problem runs in bands of lens rows (exact: the (u, v) prior couples no two lenses).")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @device_option
 @user_errors
-def command(raw, out_dir, method, pitch, pattern, outputs, lam, iterations, strength, as_json, device):
+def command(raw, out_dir, method, pitch, pattern, outputs, lam, iterations, strength, max_memory, as_json, device):
     """Demosaic a lenslet RAW (DNG, camera raw, or EXR/TIFF/PNG mosaic) into a 4D light field."""
     from ..imageio import write_image, write_npy
     from ..layout import LightFieldShape, planes_to_exchange, tiled_views
@@ -60,7 +63,8 @@ def command(raw, out_dir, method, pitch, pattern, outputs, lam, iterations, stre
     if mosaic.noise_profile is not None and method != "malvar":
         noise = from_noise_profile(mosaic.noise_profile, mosaic.data[:H, :W])
     result = demosaic_lightfield(mosaic.data[:H, :W], mosaic.pattern, (pitch, pitch), method, lam=lam,
-                                 iterations=iterations, strength=strength, noise=noise, device=device)
+                                 iterations=iterations, strength=strength, noise=noise, device=device,
+                                 max_memory=None if max_memory is None else int(max_memory * 2**30))
     timings["demosaic"] = result.seconds
     lightfield = planes_to_exchange(result.planes, shape)
     metadata = {

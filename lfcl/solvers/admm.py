@@ -85,6 +85,21 @@ def lens_block_inverses(pattern: str, origin, pitch, rho: float) -> np.ndarray:
     return blocks
 
 
+def solver_bytes(sensor_shape, dims, exact: bool) -> int:
+    """Device memory an AdmmSolver.solve needs, with its Malvar start and mosaic (bytes)."""
+    H, W = (int(n) for n in sensor_shape)
+    planes = 3 * H * W
+    k = len(ordered_dims(dims))
+    floats = (5 if exact else 9) * planes + 4 * k * planes + 2 * H * W  # planes, CG, z/u/Dx/dz, b and A x
+    return 4 * floats
+
+
+def solver_largest_buffer(sensor_shape, dims) -> int:
+    """The solver's largest single buffer (one gradient: k colour-plane sets), bytes."""
+    H, W = (int(n) for n in sensor_shape)
+    return 4 * len(ordered_dims(dims)) * 3 * H * W
+
+
 class AdmmSolver:
     """ADMM-TV for one sensor size, Bayer phase, lens pitch and set of dims.
 
