@@ -157,8 +157,10 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     if not np.all(np.isfinite(planes)):
         raise FloatingPointError(f"{method} produced NaN/Inf values; try a smaller lambda or rho")
     history = [dict(dataclasses.asdict(r), band=i) for i, run in enumerate(runs) for r in run.history]
-    reason = runs[0].stop_reason if len(runs) == 1 else f"{len(runs)} bands of lens rows, each: " + "; ".join(
-        sorted({run.stop_reason.split(" <=")[0] for run in runs}))
+    counts = [run.iterations for run in runs]
+    reason = runs[0].stop_reason if len(runs) == 1 else (
+        f"{len(runs)} bands of lens rows, {min(counts)}-{max(counts)} iterations, each stopped by its own "
+        f"rule (last band: {runs[-1].stop_reason})")
     return DemosaicResult(
         planes, method, dataclasses.asdict(params), max(run.iterations for run in runs), time.perf_counter() - start,
         reason, history, noise,
