@@ -1,34 +1,52 @@
-// The ADMM x-update's normal operator and its Jacobi preconditioner (paper, 3.4):
+// The ADMM x-update's normal operator and its Jacobi preconditioner (paper, 3.4),
+// with a weighted data term 1/2 ||W^(1/2) (A x - b)||^2:
 //
-//   M x = (A^T A + rho D^T D) x
+//   M x = (A^T W A + rho D^T D) x
 //
-// A^T A keeps each pixel's own colour (a 0/1 mask); D^T D is the 4D Laplacian with
-// Neumann ends over the chosen dims. Both are fused into one pass so CG reads x once.
+// A^T W A keeps each pixel's own colour times its weight; D^T D is the 4D Laplacian
+// with Neumann ends over the chosen dims. Both are fused into one pass so CG reads x
+// once. W repeats from lens to lens (an aligned grid's white-image response): the
+// UV weights of one lens, `lens_weights[u * V + v]`; all ones for the paper's A^T A.
 // The row-run helpers (load_row, neighbour, has_neighbour, laplacian) are in common.cl.
 // The stencil kernels handle 16 columns of one row each: global size (ceil(W / 16), H, 3).
 
+// The data-term weights of 16 columns of one row.
+inline float16 row_weights(__global const float *lens_weights, int row, int16 cols)
+{
+    int at[16];
+    vstore16((row % PITCH_U) * PITCH_V + cols % PITCH_V, 0, at);
+    float lane[16];
+    for (int k = 0; k < 16; ++k)
+        lane[k] = lens_weights[at[k]];
+    return vload16(0, lane);
+}
+
 __kernel void normal_apply(__global const float *x, __global float *y,
-                           const int height, const int width, const int pattern, const float rho)
+                           const int height, const int width, const int pattern, const float rho,
+                           __global const float *lens_weights)
 {
     const int col0 = 16 * get_global_id(0), row = get_global_id(1), c = get_global_id(2);
     if (col0 >= width || row >= height) return;
     const size_t plane_size = (size_t)height * width;
     __global const float *plane = x + c * plane_size;
     const float16 xi = load_row(plane + (size_t)row * width, col0, 0, width);
-    const float16 measured = select((float16)0.0f, xi, measured_lanes(row, lane_columns(col0), pattern, c));
+    const int16 cols = lane_columns(col0);
+    const float16 measured = select((float16)0.0f, xi * row_weights(lens_weights, row, cols),
+                                    measured_lanes(row, cols, pattern, c));
     store_row(measured + rho * laplacian(plane, xi, row, col0, height, width),
               y + c * plane_size + (size_t)row * width, col0, width);
 }
 
-// z = r / diag(M): diag(A^T A) is the 0/1 mask, diag(D^T D) the neighbour count.
+// z = r / diag(M): diag(A^T W A) is the weighted 0/1 mask, diag(D^T D) the neighbour count.
 __kernel void jacobi_apply(__global const float *r, __global float *z,
-                           const int height, const int width, const int pattern, const float rho)
+                           const int height, const int width, const int pattern, const float rho,
+                           __global const float *lens_weights)
 {
     const int col0 = 16 * get_global_id(0), row = get_global_id(1), c = get_global_id(2);
     if (col0 >= width || row >= height) return;
     const size_t offset = c * (size_t)height * width + (size_t)row * width;
     const int16 cols = lane_columns(col0);
-    float16 diagonal = select((float16)0.0f, (float16)1.0f, measured_lanes(row, cols, pattern, c));
+    float16 diagonal = select((float16)0.0f, row_weights(lens_weights, row, cols), measured_lanes(row, cols, pattern, c));
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(DIMS & d)) continue;
         for (int dir = -1; dir <= 1; dir += 2)
@@ -39,11 +57,11 @@ __kernel void jacobi_apply(__global const float *r, __global float *z,
     store_row(select((float16)0.0f, ri / diagonal, diagonal > 0.0f), z + offset, col0, width);
 }
 
-// The x-update's right-hand side in one pass: rhs = A^T b + rho D^T (z - u).
+// The x-update's right-hand side in one pass: rhs = A^T W b + rho D^T (z - u).
 // z and u hold one block of 3 planes per chosen dim (u, v, s, t order).
 __kernel void build_rhs(__global const float *b, __global const float *z, __global const float *u,
                         __global float *rhs, const int height, const int width, const int pattern,
-                        const float rho)
+                        const float rho, __global const float *lens_weights)
 {
     const int col0 = 16 * get_global_id(0), row = get_global_id(1), c = get_global_id(2);
     if (col0 >= width || row >= height) return;
@@ -63,8 +81,26 @@ __kernel void build_rhs(__global const float *b, __global const float *z, __glob
         ++block;
     }
     const float16 raw = load_row(b + (size_t)row * width, col0, 0, width);
-    const float16 measured = select((float16)0.0f, raw, measured_lanes(row, cols, pattern, c));
+    const float16 measured = select((float16)0.0f, raw * row_weights(lens_weights, row, cols),
+                                    measured_lanes(row, cols, pattern, c));
     store_row(measured + rho * divergence, rhs + c * plane_size + (size_t)row * width, col0, width);
+}
+
+// r = W^(1/2) (A x - b) on the mosaic, for the objective's data term. Global size:
+// (ceil(W / 16), H).
+__kernel void weighted_residual(__global const float *x, __global const float *b, __global float *r,
+                                const int height, const int width, const int pattern,
+                                __global const float *lens_weights)
+{
+    const int col0 = 16 * get_global_id(0), row = get_global_id(1);
+    if (col0 >= width || row >= height) return;
+    const size_t plane_size = (size_t)height * width, start = (size_t)row * width;
+    const int16 cols = lane_columns(col0);
+    float16 sampled = (float16)0.0f;  // A x: each lane's own colour
+    for (int c = 0; c < 3; ++c)
+        sampled = select(sampled, load_row(x + c * plane_size + start, col0, 0, width), measured_lanes(row, cols, pattern, c));
+    const float16 misfit = sampled - load_row(b + start, col0, 0, width);
+    store_row(sqrt(row_weights(lens_weights, row, cols)) * misfit, r + start, col0, width);
 }
 
 // Exact x-update for a (u, v)-only prior: A^T A + rho D_uv^T D_uv is block diagonal,

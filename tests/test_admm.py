@@ -146,3 +146,57 @@ def test_coupled_priors_say_why_they_cannot_run_in_bands(rng):
     b, _ = smooth_lightfield_mosaic(rng, 4, 4, 9, 9)
     with pytest.raises(ValueError, match="couples\\s+neighbouring lenses|couples neighbouring lenses"):
         demosaic_lightfield(b, "GRBG", (9, 9), "admm-st", iterations=2, max_memory=100_000)
+
+
+def vignetting_weights(U, V, floor=0.0):
+    """A white-image-like response: 1 in the middle of the lens, falling towards the corners."""
+    u = (np.arange(U) - (U - 1) / 2) / max(U / 2, 1)
+    v = (np.arange(V) - (V - 1) / 2) / max(V / 2, 1)
+    w = np.clip(1.0 - 0.6 * (u[:, None] ** 2 + v[None, :] ** 2), 0, None)
+    w[w < floor] = 0.0  # dark corners left out of the data term
+    return w.astype(np.float32)
+
+
+@pytest.mark.parametrize("dims,x_update", [("uv", "lens"), ("uv", "cg"), ("uvst", "cg")])
+def test_weighted_data_term_matches_the_reference(runtime, rng, dims, x_update):
+    U, V = 9, 9
+    b, x0 = smooth_lightfield_mosaic(rng, 3, 5, U, V, "GBRG")
+    weights = vignetting_weights(U, V, floor=0.3)
+    assert (weights == 0).any()
+    steps = 400 if x_update == "lens" else 4
+    reference_params = AdmmParams(lam=0.01, max_iter=6, cg_steps=steps, cg_tol=1e-13 if x_update == "lens" else 0.0)
+    expected = admm_reference(b, "GBRG", (U, V), dims, reference_params, x0, lens_weights=weights)
+    solver = AdmmSolver(runtime, b.shape, "GBRG", (U, V), dims)
+    params = AdmmParams(lam=0.01, max_iter=6, cg_steps=4, cg_tol=0.0, x_update=x_update)
+    got = solver.solve(runtime.to_device(b), runtime.to_device(x0), params, lens_weights=weights)
+    relative = np.linalg.norm(got.x.get() - expected.x) / np.linalg.norm(expected.x)
+    assert relative <= 1e-4, relative
+    for mine, ref in zip(got.history, expected.history):
+        assert mine.objective == pytest.approx(ref.objective, rel=1e-4)
+
+
+def test_zero_weight_pixels_do_not_influence_the_result(runtime, rng):
+    # Whatever a left-out pixel holds, the solution is the same.
+    U, V = 9, 9
+    b, x0 = smooth_lightfield_mosaic(rng, 3, 4, U, V)
+    weights = vignetting_weights(U, V, floor=0.3)
+    corrupted = b.copy()
+    dark = np.tile(weights == 0, (3, 4))
+    corrupted[dark] = 50.0  # hot garbage in the vignetted corners
+    solver = AdmmSolver(runtime, b.shape, "GRBG", (U, V), "uv")
+    params = AdmmParams(lam=0.01, max_iter=5)
+    clean = solver.solve(runtime.to_device(b), runtime.to_device(x0), params, lens_weights=weights).x.get()
+    dirty = solver.solve(runtime.to_device(corrupted), runtime.to_device(x0), params, lens_weights=weights).x.get()
+    np.testing.assert_allclose(dirty, clean, atol=1e-6)
+    # and unit weights are the paper's unweighted problem
+    plain = solver.solve(runtime.to_device(b), runtime.to_device(x0), params).x.get()
+    ones = solver.solve(runtime.to_device(b), runtime.to_device(x0), params, lens_weights=np.ones((U, V))).x.get()
+    np.testing.assert_array_equal(plain, ones)
+
+
+def test_bad_lens_weights_raise(runtime, rng):
+    b, x0 = smooth_lightfield_mosaic(rng, 2, 2, 9, 9)
+    solver = AdmmSolver(runtime, b.shape, "GRBG", (9, 9), "uv")
+    for bad in (np.ones((3, 3)), -np.ones((9, 9)), np.full((9, 9), np.nan)):
+        with pytest.raises(ValueError, match="lens weights"):
+            solver.solve(runtime.to_device(b), runtime.to_device(x0), AdmmParams(max_iter=1), lens_weights=bad)

@@ -60,8 +60,11 @@ def _lens_laplacian(pitch) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=16)
-def lens_block_inverses(pattern: str, origin, pitch, rho: float) -> np.ndarray:
-    """(A^T A + rho D_uv^T D_uv)^-1 restricted to one lens: [4 parities, 3 colours, UV, UV].
+def lens_block_inverses(pattern: str, origin, pitch, rho: float, lens_weights: tuple | None = None) -> np.ndarray:
+    """(A^T W A + rho D_uv^T D_uv)^-1 restricted to one lens: [4 parities, 3 colours, UV, UV].
+
+    ``lens_weights``: the data-term weight of each of the lens's UV pixels (row-major
+    tuple, hashable for the cache); None for all ones.
 
     Parity 2*ps + pt: the Bayer parity (row, col) of the lens's first sensor pixel. A
     block is symmetric positive definite when the lens has a pixel of that colour; a
@@ -70,14 +73,16 @@ def lens_block_inverses(pattern: str, origin, pitch, rho: float) -> np.ndarray:
     """
     U, V = pitch
     laplacian = _lens_laplacian((U, V))
+    weights = np.ones(U * V) if lens_weights is None else np.asarray(lens_weights, dtype=np.float64)
     blocks = np.empty((4, 3, U * V, U * V), np.float32)
     for ps in range(2):
         for pt in range(2):
             colours = channel_map((U, V), pattern, (origin[0] + ps, origin[1] + pt)).ravel()
             for c in range(3):
-                normal = np.diag((colours == c).astype(np.float64)) + rho * laplacian
+                measured = (colours == c) * weights
+                normal = np.diag(measured) + rho * laplacian
                 try:
-                    inverse = np.linalg.inv(normal) if (colours == c).any() else np.linalg.pinv(normal)
+                    inverse = np.linalg.inv(normal) if measured.any() else np.linalg.pinv(normal)
                 except np.linalg.LinAlgError:
                     inverse = np.linalg.pinv(normal, hermitian=True)
                 blocks[2 * ps + pt, c] = inverse
@@ -119,7 +124,10 @@ class AdmmSolver:
         self.reduce = Reductions(runtime)
         self.shrink = Shrinkage(runtime)
         self.pattern, self.origin = pattern, origin
-        self._inverse = None  # per-lens inverse blocks, built for one rho on first use
+        self._inverse = None  # per-lens inverse blocks, built for one rho and weights on first use
+        self._unit_weights = tuple([1.0] * (self.U * self.V))
+        self._weights_key = self._unit_weights
+        self._weights = runtime.to_device(np.ones(self.U * self.V, np.float32))
         self._normal_args = (np.int32(self.height), np.int32(self.width), packed_pattern(pattern, origin))
         self._defines = grid_defines(pitch, dims_mask(self.dims))
         self._row_runs = ((self.width + 15) // 16, self.height, 3)  # stencils: 16 columns a work-item
@@ -146,14 +154,14 @@ class AdmmSolver:
         """out = A^T b + rho D^T (z - u)."""
         self.runtime.launch(
             "admm", "build_rhs", self._row_runs, b.data, z.data, u.data, out.data,
-            *self._normal_args, np.float32(rho), defines=self._defines,
+            *self._normal_args, np.float32(rho), self._weights.data, defines=self._defines,
         )
         return out
 
     def _launch(self, kernel, src, out, rho):
         self.runtime.launch(
             "admm", kernel, self._row_runs, src.data, out.data,
-            *self._normal_args, np.float32(rho), defines=self._defines,
+            *self._normal_args, np.float32(rho), self._weights.data, defines=self._defines,
         )
         return out
 
@@ -164,13 +172,16 @@ class AdmmSolver:
 
     def lens_solve(self, rhs, x, rho):
         """x = (A^T A + rho D_uv^T D_uv)^-1 rhs, exactly, lens by lens."""
-        if self._inverse is None or self._inverse[0] != rho:
-            blocks = lens_block_inverses(self.pattern, tuple(o % 2 for o in self.origin), (self.U, self.V), float(rho))
+        key = (rho, self._weights_key)
+        if self._inverse is None or self._inverse[0] != key:
+            weights = None if self._weights_key == self._unit_weights else self._weights_key
+            blocks = lens_block_inverses(self.pattern, tuple(o % 2 for o in self.origin), (self.U, self.V),
+                                         float(rho), weights)
             # the kernel reads block columns as float16 runs: transpose, pad i to 16
             UV = self.U * self.V
             padded = np.zeros((4, 3, UV, -(-UV // 16) * 16), np.float32)
             padded[..., :UV] = blocks.transpose(0, 1, 3, 2)
-            self._inverse = (rho, self.runtime.to_device(padded))
+            self._inverse = (key, self.runtime.to_device(padded))
         self.runtime.launch(
             "admm", "lens_solve", (2 * -(-(self.width // self.V) // 4), self.height // self.U, 3),
             rhs.data, x.data, self._inverse[1].data, np.int32(self.height), np.int32(self.width),
@@ -202,13 +213,31 @@ class AdmmSolver:
             rz = rz_next
         return max_steps
 
-    def solve(self, b, x0, params: AdmmParams, callback=None) -> AdmmResult:
+    def set_lens_weights(self, lens_weights=None):
+        """Data-term weights of the U x V pixels of every lens (None: all ones).
+
+        For an aligned grid the white image's response repeats from lens to lens;
+        a weight of 0 leaves that pixel out of the data term (a dark, vignetted corner).
+        """
+        if lens_weights is None:
+            weights = np.ones((self.U, self.V), np.float32)
+        else:
+            weights = np.asarray(lens_weights, dtype=np.float32)
+            if weights.shape != (self.U, self.V) or not np.all(np.isfinite(weights)) or np.any(weights < 0):
+                raise ValueError(f"lens weights must be a finite, non-negative {self.U}x{self.V} array, "
+                                 f"got shape {weights.shape}")
+        self._weights_key = tuple(float(w) for w in weights.ravel())
+        self._weights.set(weights.ravel())
+
+    def solve(self, b, x0, params: AdmmParams, callback=None, lens_weights=None) -> AdmmResult:
         """Run ADMM on mosaic ``b`` [H, W] from ``x0`` [3, H, W] (both float32 device arrays).
 
         ``x0`` is not modified; the result's ``x`` is a new device array.
         ``callback(record, x)`` is called after every iteration (progress bars,
         parameter sweeps); ``x`` is the current device array, not to be modified.
+        ``lens_weights`` [U, V]: see :meth:`set_lens_weights`.
         """
+        self.set_lens_weights(lens_weights)
         check_device_array(b, (self.height, self.width), "b")
         check_device_array(x0, self.planes_shape, "x0")
         rho, lam = params.rho, params.lam
@@ -230,10 +259,13 @@ class AdmmSolver:
             D.forward(x, out=self._dx)
             self.shrink.zu_update(self._dx, self._z, self._u, self._dz, params.kappa)
             D.adjoint(self._dz, out=self._tmp)
-            self.A.forward(x, out=self._mosaic)
+            self.runtime.launch(  # W^(1/2) (A x - b)
+                "admm", "weighted_residual", self._row_runs[:2], x.data, b.data, self._mosaic.data,
+                *self._normal_args, self._weights.data, defines=self._defines,
+            )
             # the whole history in one round trip to the host
             primal2, dual2, misfit2, tv, change2 = red.many(
-                ("diff_norm2", self._dx, self._z), ("norm2", self._tmp), ("diff_norm2", self._mosaic, b),
+                ("diff_norm2", self._dx, self._z), ("norm2", self._tmp), ("norm2", self._mosaic),
                 ("abs_sum", self._dx), ("diff_norm2", x, self._x_prev),
             )
             record = IterationRecord(

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from ..ops.cfa import cfa_adjoint_np, cfa_gram_np, cfa_sample_np
+from ..ops.cfa import cfa_adjoint_np, cfa_sample_np
 from ..ops.gradient import gradient_adjoint_np, gradient_gram_np, gradient_np
 from .params import AdmmParams, AdmmResult, IterationRecord, stop_reason
 
@@ -65,9 +65,16 @@ def conjugate_gradient(apply, rhs, x, precondition, max_steps, tol):
     return x, max_steps
 
 
-def admm_reference(b, pattern, pitch, dims, params: AdmmParams, x0, origin=(0, 0)) -> AdmmResult:
-    """Solve the paper's problem for mosaic ``b`` [H, W] from the start ``x0`` [3, H, W]."""
+def admm_reference(b, pattern, pitch, dims, params: AdmmParams, x0, origin=(0, 0), lens_weights=None) -> AdmmResult:
+    """Solve the paper's problem for mosaic ``b`` [H, W] from the start ``x0`` [3, H, W].
+
+    ``lens_weights`` [U, V] weight the data term, 1/2 ||W^(1/2) (A x - b)||^2, with the
+    same weights under every lens (None: the paper's unweighted term).
+    """
     b = np.asarray(b, dtype=np.float64)
+    U, V = pitch
+    w = np.ones((U, V)) if lens_weights is None else np.asarray(lens_weights, dtype=np.float64)
+    w = np.tile(w, (b.shape[0] // U, b.shape[1] // V))  # per sensor pixel
     x = np.array(x0, dtype=np.float64)
     rho, kappa = params.rho, params.kappa
 
@@ -81,12 +88,12 @@ def admm_reference(b, pattern, pitch, dims, params: AdmmParams, x0, origin=(0, 0
         return gradient_adjoint_np(v, pitch, dims)
 
     def normal(v):
-        return cfa_gram_np(v, pattern, origin) + rho * gradient_gram_np(v, pitch, dims)
+        return cfa_adjoint_np(w * A(v), pattern, origin) + rho * gradient_gram_np(v, pitch, dims)
 
-    diagonal = cfa_gram_np(np.ones_like(x), pattern, origin) + rho * neighbour_count(x.shape, pitch, dims)
+    diagonal = cfa_adjoint_np(w, pattern, origin) + rho * neighbour_count(x.shape, pitch, dims)
     inverse_diagonal = np.divide(1.0, diagonal, out=np.zeros_like(diagonal), where=diagonal > 0)
 
-    Atb = cfa_adjoint_np(b, pattern, origin)
+    Atb = cfa_adjoint_np(w * b, pattern, origin)
     z = D(x)
     u = np.zeros_like(z)
     history = []
@@ -100,7 +107,7 @@ def admm_reference(b, pattern, pitch, dims, params: AdmmParams, x0, origin=(0, 0
         u = v - z_next
         record = IterationRecord(
             iteration=len(history) + 1,
-            objective=0.5 * float(np.sum((A(x_next) - b) ** 2)) + params.lam * float(np.sum(np.abs(dx))),
+            objective=0.5 * float(np.sum(w * (A(x_next) - b) ** 2)) + params.lam * float(np.sum(np.abs(dx))),
             primal_residual=float(np.linalg.norm(dx - z_next)),
             dual_residual=rho * float(np.linalg.norm(Dt(z_next - z))),
             rms_change=float(np.sqrt(np.mean((x_next - x) ** 2))),
