@@ -21,6 +21,7 @@ import time
 import numpy as np
 
 from .device import get_runtime
+from .flatfield import flat_field
 from .noise import NoiseEstimate, estimate_noise
 from .ops.malvar import Malvar
 from .solvers.admm import AdmmSolver, solver_bytes, solver_largest_buffer
@@ -97,7 +98,8 @@ def lens_row_bands(lens_rows: int, per_row: tuple[int, int], limits: tuple[int, 
 
 def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
                         lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
-                        device=None, callback=None, max_memory: int | None = None) -> DemosaicResult:
+                        device=None, callback=None, max_memory: int | None = None,
+                        lens_response=None) -> DemosaicResult:
     """Demosaic (and denoise) a normalised lenslet mosaic [H, W] into [3, H, W] planes.
 
     H and W must be whole multiples of the pitch (crop first). ``noise`` defaults to
@@ -106,6 +108,9 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     buffers: a larger admm-uv problem runs in bands of lens rows, which is exact
     because the (u, v) prior couples no two lenses (each band stops on its own rule);
     the other priors couple neighbouring lenses and say so instead.
+    ``lens_response`` [U, V] (the white image's vignetting, lfcl/flatfield.py):
+    flat-field the mosaic, and for the ADMM methods weight the data term by the
+    response squared, leaving the dark corners out.
     """
     method = parse_method(method)
     mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
@@ -116,6 +121,9 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         raise ValueError(f"mosaic {mosaic.shape[0]}x{mosaic.shape[1]} is not a whole number of {U}x{V} lenses")
     if not np.all(np.isfinite(mosaic)):
         raise ValueError("mosaic holds NaN or Inf values")
+    raw_mosaic, lens_weights = mosaic, None
+    if lens_response is not None:
+        mosaic, lens_weights = flat_field(mosaic, lens_response)
     runtime = get_runtime(device)
     start = time.perf_counter()
     b = runtime.to_device(mosaic)
@@ -124,7 +132,7 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         planes = x0.get()
         return DemosaicResult(planes, method, {}, 0, time.perf_counter() - start, "direct", [], None)
     if noise is None:
-        noise = estimate_noise(mosaic, pattern, pitch, origin)
+        noise = estimate_noise(raw_mosaic, pattern, pitch, origin)  # the noise of the raw, as lambda expects
     params = admm_params(method, noise.sigma, lam=lam, iterations=iterations, rho=rho, strength=strength)
     dims = ADMM_DEFAULTS[method].dims
     H, W = mosaic.shape
@@ -132,7 +140,8 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     needed = solver_bytes((H, W), dims, exact=dims == "uv")
     largest = solver_largest_buffer((H, W), dims)
     if needed <= budget and largest <= runtime.device.max_mem_alloc_size:
-        result = AdmmSolver(runtime, mosaic.shape, pattern, pitch, dims, origin).solve(b, x0, params, callback=callback)
+        result = AdmmSolver(runtime, mosaic.shape, pattern, pitch, dims, origin).solve(
+            b, x0, params, callback=callback, lens_weights=lens_weights)
         planes, runs = result.x.get(), [result]
     elif dims == "uv":
         per_row = (solver_bytes((U, W), dims, exact=True), solver_largest_buffer((U, W), dims))
@@ -144,7 +153,7 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
             rows = slice(s0 * U, s1 * U)
             band = AdmmSolver(runtime, (rows.stop - rows.start, W), pattern, pitch, dims, (origin[0] + rows.start, origin[1]))
             result = band.solve(runtime.to_device(mosaic[rows]), runtime.to_device(x0_host[:, rows]), params,
-                                callback=callback)
+                                callback=callback, lens_weights=lens_weights)
             planes[:, rows] = result.x.get()
             runs.append(result)
     else:
