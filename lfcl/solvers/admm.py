@@ -226,8 +226,10 @@ class AdmmSolver:
             if weights.shape != (self.U, self.V) or not np.all(np.isfinite(weights)) or np.any(weights < 0):
                 raise ValueError(f"lens weights must be a finite, non-negative {self.U}x{self.V} array, "
                                  f"got shape {weights.shape}")
-        self._weights_key = tuple(float(w) for w in weights.ravel())
-        self._weights.set(weights.ravel())
+        key = tuple(float(w) for w in weights.ravel())
+        if key != self._weights_key:  # a blocking upload: only when the weights change
+            self._weights_key = key
+            self._weights.set(weights.ravel())
 
     def solve(self, b, x0, params: AdmmParams, callback=None, lens_weights=None) -> AdmmResult:
         """Run ADMM on mosaic ``b`` [H, W] from ``x0`` [3, H, W] (both float32 device arrays).
