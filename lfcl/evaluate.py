@@ -2,9 +2,12 @@
 
 A capture folder (``lfcl simulate``) holds raw.dng, meta.json and truth.npy. For
 each method we demosaic raw.dng, reshape to [S, T, U, V, 3] and score PSNR on the
-centre view and the mean image (Tables 1-2), with seconds and iterations; the
-figures are error maps (Figs 6-7), zoomed crops (Figs 8-9), PSNR against
-illumination (Fig. 10) and ground-truth gradients (Fig. 5).
+centre view and the mean image (Tables 1-2), with seconds and iterations, and the
+colour-artefact metrics of docs/colour-metrics.md (CIEDE2000 mean and 95th
+percentile, false colour on grey edges, chroma error at high frequencies; the
+paper's section 5 claim); the figures are error maps (Figs 6-7), zoomed crops
+(Figs 8-9), PSNR and colour errors against illumination (Fig. 10) and
+ground-truth gradients (Fig. 5).
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ import numpy as np
 from . import plots
 from .layout import DIMS, planes_to_exchange, LightFieldShape
 from .methods import METHODS, demosaic_lightfield, parse_method
-from .metrics import centre_view, lightfield_scores, mean_image
+from .metrics import centre_view, lightfield_colour_scores, lightfield_scores, mean_image
 from .raw import read_mosaic
 
 
@@ -65,6 +68,7 @@ def run_method(capture: Capture, method: str, device=None, **overrides) -> dict:
     return {
         "method": method,
         **lightfield_scores(lightfield, capture.truth),
+        **lightfield_colour_scores(lightfield, capture.truth),
         "seconds": result.seconds,
         "iterations": result.iterations,
         "stop_reason": result.stop_reason,
@@ -74,12 +78,34 @@ def run_method(capture: Capture, method: str, device=None, **overrides) -> dict:
     }
 
 
+# (key, row label, format) of the colour rows of the tables, per view (docs/colour-metrics.md).
+COLOUR_ROWS = (
+    ("de2000_mean", "ΔE00 mean", "{:.2f}"),
+    ("de2000_p95", "ΔE00 p95", "{:.2f}"),
+    ("false_colour", "False colour", "{:.2f}"),
+    ("hf_chroma_error", "HF chroma error", "{:.2f}"),
+)
+VIEW_LABELS = (("center", "centre"), ("mean", "mean image"))
+
+
+def _cell(value, fmt: str = "{:.2f}") -> str:
+    return "n/a" if value is None else fmt.format(value)
+
+
 def format_table(rows: list[dict], title: str) -> str:
-    """The paper's table layout: methods as columns, Center / Mean Image as rows (Markdown)."""
+    """The paper's table layout: methods as columns, Center / Mean Image as rows (Markdown).
+
+    Below PSNR, the colour-artefact rows (ΔE00 mean and p95, false colour, HF chroma error) for
+    the centre view and the mean image, when the rows carry them; "n/a" where undefined.
+    """
     names = [r["method"] for r in rows]
     lines = [f"**{title}**", "", "| | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
     lines.append("| Center | " + " | ".join(f"{r['psnr_center']:.2f} dB" for r in rows) + " |")
     lines.append("| Mean Image | " + " | ".join(f"{r['psnr_mean']:.2f} dB" for r in rows) + " |")
+    for view, view_label in VIEW_LABELS:
+        for key, label, fmt in COLOUR_ROWS:
+            if all(f"{key}_{view}" in r for r in rows):
+                lines.append(f"| {label} ({view_label}) | " + " | ".join(_cell(r[f"{key}_{view}"], fmt) for r in rows) + " |")
     lines.append("| Seconds | " + " | ".join(f"{r['seconds']:.2f}" for r in rows) + " |")
     lines.append("| Iterations | " + " | ".join(str(r["iterations"]) for r in rows) + " |")
     return "\n".join(lines)
@@ -160,13 +186,22 @@ def centre_gradient_images(truth: np.ndarray) -> dict:
 
 
 def format_sweep(sweep: list[dict]) -> str:
-    """PSNR against illumination, centre / mean per method (paper, Fig. 10 as a table)."""
+    """PSNR against illumination, centre / mean per method (paper, Fig. 10 as a table), then the
+    colour-artefact metrics against illumination, one table per view."""
     methods = [r["method"] for r in sweep[0]["results"]]
-    lines = ["**PSNR against illumination** (centre / mean, dB)", "",
-             "| lux | " + " | ".join(methods) + " |", "|---" * (len(methods) + 1) + "|"]
+    header = ["| lux | " + " | ".join(methods) + " |", "|---" * (len(methods) + 1) + "|"]
+    lines = ["**PSNR against illumination** (centre / mean, dB)", "", *header]
     for entry in sweep:
         cells = [f"{r['psnr_center']:.2f} / {r['psnr_mean']:.2f}" for r in entry["results"]]
         lines.append(f"| {entry['lux']:g} | " + " | ".join(cells) + " |")
+    if all("de2000_mean_center" in r for e in sweep for r in e["results"]):
+        for view, view_label in VIEW_LABELS:
+            title = (f"**Colour errors against illumination, {view_label}** "
+                     "(ΔE00 mean / ΔE00 p95 / false colour / HF chroma error)")
+            lines += ["", title, "", *header]
+            for entry in sweep:
+                cells = [" / ".join(_cell(r[f"{key}_{view}"]) for key, _, _ in COLOUR_ROWS) for r in entry["results"]]
+                lines.append(f"| {entry['lux']:g} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -178,3 +213,38 @@ def plot_sweep(sweep: list[dict], path, label: str):
         for i, m in enumerate(methods):
             series[f"{m} ({view})"] = [e["results"][i][f"psnr_{view}"] for e in sweep]
     return plots.psnr_curves(lux, series, path, "mean illuminance (lux)", "PSNR (dB)", f"{label}: PSNR vs illumination")
+
+
+def plot_colour_sweep(sweep: list[dict], path, label: str):
+    """ΔE00 mean, false colour and HF chroma error against illumination: one panel each,
+    centre view solid, mean image dashed, one colour per method."""
+    import matplotlib.pyplot as plt
+
+    lux = [e["lux"] for e in sweep]
+    methods = [r["method"] for r in sweep[0]["results"]]
+    panels = [("de2000_mean", "ΔE00 mean"), ("false_colour", "false colour (Δa*b*, grey edges)"),
+              ("hf_chroma_error", "HF chroma error (Δa*b*)")]
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4), squeeze=False)
+    legend_drawn = False
+    for ax, (key, title) in zip(axes[0], panels):
+        drawn = False
+        for i, m in enumerate(methods):
+            for view, style, marker in (("center", "-", "o"), ("mean", "--", "s")):
+                ys = [e["results"][i][f"{key}_{view}"] for e in sweep]
+                if all(y is None for y in ys):
+                    continue
+                ax.plot(lux, [np.nan if y is None else y for y in ys], style, marker=marker, color=f"C{i}",
+                        label=f"{m} ({view})")
+                drawn = True
+        ax.set_xscale("log")
+        ax.set_xlabel("mean illuminance (lux)")
+        ax.set_title(title)
+        ax.grid(True, which="both", alpha=0.3)
+        if drawn and not legend_drawn:
+            ax.legend(fontsize=7)
+            legend_drawn = True
+        elif not drawn:
+            ax.text(0.5, 0.5, "n/a: too few grey high-contrast pixels", ha="center", va="center",
+                    transform=ax.transAxes)
+    fig.suptitle(f"{label}: colour errors vs illumination (centre solid, mean image dashed)", y=1.03)
+    return plots._save(fig, path)

@@ -1,4 +1,5 @@
-"""`lfcl evaluate`: score methods against a simulated capture's ground truth (paper, section 4)."""
+"""`lfcl evaluate`: score methods against a simulated capture's ground truth (paper, section 4),
+with the colour-artefact metrics of docs/colour-metrics.md (paper, section 5)."""
 
 from __future__ import annotations
 
@@ -27,13 +28,18 @@ def _floats(text: str, name: str) -> list[float]:
 @click.option("-o", "--output", "out_dir", default=None, type=click.Path(file_okay=False, path_type=Path),
               help="Where eval.json, eval.md and the figures go. Default: CAPTURE_DIR/eval.")
 @click.option("--sweep-lux", default=None, metavar="LUX,...",
-              help="Also re-simulate the scene at these illuminations and tabulate/plot PSNR (paper, Fig. 10).")
+              help="Also re-simulate the scene at these illuminations and tabulate/plot PSNR (paper, Fig. 10) "
+                   "and the colour errors (psnr_vs_lux.png, de2000_vs_lux.png).")
 @click.option("--gradients", is_flag=True, help="Report the ground truth's gradient sparsity along u, v, s, t (Fig. 5).")
 @click.option("--json", "as_json", is_flag=True, help="Print the results as JSON instead of tables.")
 @device_option
 @user_errors
 def command(capture_dir, methods, out_dir, sweep_lux, gradients, as_json, device):
-    """Run METHODS on CAPTURE_DIR/raw.dng and score them against CAPTURE_DIR/truth.npy."""
+    """Run METHODS on CAPTURE_DIR/raw.dng and score them against CAPTURE_DIR/truth.npy.
+
+    Scores: PSNR, CIEDE2000 mean and 95th percentile, false colour on grey edges and chroma
+    error at high frequencies, on the centre view and the mean image (docs/colour-metrics.md).
+    """
     from tqdm import tqdm
 
     from .. import evaluate as ev
@@ -50,7 +56,7 @@ def command(capture_dir, methods, out_dir, sweep_lux, gradients, as_json, device
     report = {"capture": str(capture_dir), "scene": capture.meta["scene"], "lux": capture.meta["lux"],
               "lenses": capture.meta["lenses"],
               "results": [{k: v for k, v in r.items() if k != "lightfield"} for r in results]}
-    markdown = [ev.format_table(results, f"PSNR, {label} ({capture.meta['lenses'][0]}x{capture.meta['lenses'][1]} lenses)")]
+    markdown = [ev.format_table(results, f"PSNR and colour errors, {label} ({capture.meta['lenses'][0]}x{capture.meta['lenses'][1]} lenses)")]
     deferred_figures = []  # drawn at the end, with the other outputs
 
     if gradients:
@@ -71,6 +77,7 @@ def command(capture_dir, methods, out_dir, sweep_lux, gradients, as_json, device
         report["sweep"] = sweep
         markdown.append("\n" + ev.format_sweep(sweep))
         deferred_figures.append(lambda: ev.plot_sweep(sweep, out_dir / "psnr_vs_lux.png", label))
+        deferred_figures.append(lambda: ev.plot_colour_sweep(sweep, out_dir / "de2000_vs_lux.png", label))
 
     # Everything is computed; only now write, so a failure above leaves no partial output.
     figures = ev.write_figures(capture, results, out_dir, label) + [str(draw()) for draw in deferred_figures]
