@@ -34,7 +34,9 @@ def test_process_writes_the_exchange_layout(capture_dir, tmp_path):
     assert lightfield.shape == truth.shape == (12, 14, 9, 9, 3) and lightfield.dtype == np.float32
     np.testing.assert_allclose(read_image(out / "center.exr"), centre_view(lightfield), atol=0)
     assert lightfield_scores(lightfield, truth)["psnr_center"] > 30
-    assert sorted(p.name for p in out.iterdir()) == ["center.exr", "lightfield.npy"]
+    # previews are on by default (center.png) and every run records summary.json (docs/outputs.md)
+    assert sorted(p.name for p in out.iterdir()) == ["center.exr", "center.png", "lightfield.npy", "summary.json"]
+    assert json.loads((out / "summary.json").read_text()) == summary
 
 
 def test_admm_uv_improves_on_malvar_at_low_light(capture_dir, tmp_path):
@@ -58,6 +60,31 @@ def test_evaluate_writes_table_and_figures(capture_dir, tmp_path):
     assert [r["method"] for r in report["results"]] == ["malvar", "admm-uv"]
     assert set(report["gradients"]) == {"u", "v", "s", "t"}
     for name in ("eval.md", "error_center.png", "crops_center.png", "error_mean.png", "gradients.png"):
+        assert (out / name).stat().st_size > 0
+    # Colour-artefact metrics (docs/colour-metrics.md): keys per view in eval.json, rows in the table.
+    for r in report["results"]:
+        for view in ("center", "mean"):
+            assert 0 < r[f"de2000_mean_{view}"] < r[f"de2000_p95_{view}"] < 100
+            assert r[f"hf_chroma_error_{view}"] > 0
+            # deadleaves has (almost) no grey pixels: false colour is undefined there, null in JSON
+            assert f"false_colour_{view}" in r and (r[f"false_colour_{view}"] is None or r[f"false_colour_{view}"] > 0)
+    for label in ("ΔE00 mean", "ΔE00 p95", "False colour", "HF chroma error"):
+        for view in ("centre", "mean image"):
+            assert f"| {label} ({view}) |" in result.output
+    assert "| False colour (centre) |" in (out / "eval.md").read_text()
+
+
+def test_evaluate_sweep_tabulates_and_plots_colour_errors(capture_dir, tmp_path):
+    out = tmp_path / "eval"
+    result = CliRunner().invoke(cli, ["evaluate", str(capture_dir), "--methods", "malvar", "--sweep-lux", "2,8",
+                                      "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "Colour errors against illumination, centre" in result.output
+    assert "Colour errors against illumination, mean image" in result.output
+    sweep = json.loads((out / "eval.json").read_text())["sweep"]
+    assert [e["lux"] for e in sweep] == [2, 8]
+    assert all("de2000_mean_center" in e["results"][0] and "false_colour_mean" in e["results"][0] for e in sweep)
+    for name in ("psnr_vs_lux.png", "de2000_vs_lux.png"):
         assert (out / name).stat().st_size > 0
 
 
