@@ -40,14 +40,28 @@ def atomic_path(path, suffix: str | None = None):
         raise
 
 
+def one_line_error(text, limit: int = 400) -> str:
+    """OpenImageIO's error text as one line: its lines (often repeated) once each, joined, shortened."""
+    parts: list[str] = []
+    for line in str(text or "").splitlines():
+        line = " ".join(line.split())
+        if line and line not in parts:
+            parts.append(line)
+    joined = "; ".join(parts)
+    return joined if len(joined) <= limit else joined[: limit - 3].rstrip() + "..."
+
+
 def read_image(path) -> np.ndarray:
-    """Any image OpenImageIO reads, as float32 ``(H, W, C)``."""
-    buf = oiio.ImageBuf(str(path))
-    if buf.has_error:
-        raise ImageReadError(f"cannot read image {path}: {buf.geterror().strip()}")
-    pixels = buf.get_pixels(oiio.FLOAT)
-    if buf.has_error or pixels is None:
-        raise ImageReadError(f"cannot read image {path}: {buf.geterror().strip()}")
+    """Any image OpenImageIO reads, as float32 ``(H, W, C)``; ``ImageReadError`` (one line) if it cannot."""
+    from .raw import _captured_stderr  # image libraries (libpng) print on fd 2 before OIIO reports
+
+    with _captured_stderr():
+        buf = oiio.ImageBuf(str(path))
+        if buf.has_error:
+            raise ImageReadError(f"cannot read image {path}: {one_line_error(buf.geterror()) or 'unknown format'}")
+        pixels = buf.get_pixels(oiio.FLOAT)
+        if buf.has_error or pixels is None:
+            raise ImageReadError(f"cannot read image {path}: {one_line_error(buf.geterror()) or 'read failed'}")
     pixels = np.asarray(pixels, dtype=np.float32)
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]

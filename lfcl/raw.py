@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 import os
 import sys
 import tempfile
@@ -146,32 +147,15 @@ def read_mosaic(path, pattern: str | None = None, *, max_pixels: int = MAX_PIXEL
 def _read_image_mosaic(path: Path, pattern: str | None, max_pixels: int) -> Mosaic:
     import OpenImageIO as oiio
 
-    from .imageio import read_image
-
     if pattern is None:
         raise ValueError(
             f"{path.name} is an image file, which does not say its Bayer pattern: give one "
             "(--pattern RGGB, GRBG, GBRG or BGGR)"
         )
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise ValueError(f"cannot read image {path}: {_one_line(oiio.geterror()) or 'unknown format'}")
-    try:
-        spec = inp.spec()
-        width, height = spec.width, spec.height
-        fmt = spec.format
-        declared_bits = spec.get_int_attribute("oiio:BitsPerSample", 0)
-    finally:
-        inp.close()
-    if width * height > max_pixels:
-        raise ValueError(
-            f"{path.name} is {width}x{height} = {width * height} pixels, more than the limit of {max_pixels}"
-        )
-    try:
-        pixels = read_image(path)
-    except ValueError as exc:
-        raise ValueError(_one_line(str(exc))) from None
-    data = _single_channel(pixels, path)
+    # libpng and friends print their complaints on fd 2 before OpenImageIO reports them
+    # (which it does, in the error we raise): keep them off the user's terminal.
+    with _captured_stderr():
+        data, fmt, declared_bits = _read_image_plane(path, max_pixels)
     if not np.all(np.isfinite(data)):
         raise ValueError(f"{path.name} holds NaN or infinite values; a mosaic must be finite")
 
@@ -186,25 +170,82 @@ def _read_image_mosaic(path: Path, pattern: str | None, max_pixels: int) -> Mosa
         bits = None
         raw_max = float(data.max())
     return Mosaic(
-        data=np.ascontiguousarray(data, dtype=np.float32), pattern=pattern, origin=(0, 0),
+        data=data, pattern=pattern, origin=(0, 0),
         black=[0.0, 0.0, 0.0, 0.0], white=1.0, source=str(path), bits=bits, raw_max=raw_max, kind="image",
     )
 
 
-def _single_channel(pixels: np.ndarray, path: Path) -> np.ndarray:
-    """The mosaic plane of an ``(H, W, C)`` image, or ``ValueError`` naming the shape."""
-    channels = pixels.shape[2]
-    if channels == 1:
-        return pixels[:, :, 0]
-    if channels in (3, 4):
-        first = pixels[:, :, 0]
-        rgb = pixels[:, :, :3]
-        if np.array_equal(rgb[:, :, 1], first) and np.array_equal(rgb[:, :, 2], first):
-            return first  # the mosaic repeated in R, G and B
-        if not np.any(rgb[:, :, 1:]):
-            return first  # the mosaic in the first channel, the others zero
-    raise ValueError(
-        f"{path.name} has shape {pixels.shape[0]}x{pixels.shape[1]}x{channels}: a mosaic must have one "
+#: Samples per band when an image mosaic is read (bounded temporary memory: the result is
+#: the only full-size array, whatever the file's channel count).
+_BAND_SAMPLES = 1 << 22
+
+
+def _read_image_plane(path: Path, max_pixels: int):
+    """The mosaic plane (float32 ``[H, W]``) of an image file, its pixel format and declared bits.
+
+    The header is checked first (size against ``max_pixels``, channel count), so a
+    file that declares a huge or non-mosaic image is refused before anything is
+    allocated; the pixels are then read in bands of rows, the first channel kept
+    and the others only compared with it (the layouts of the module docstring).
+    """
+    import OpenImageIO as oiio
+
+    from .imageio import one_line_error
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise ValueError(f"cannot read image {path}: {one_line_error(oiio.geterror()) or 'unknown format'}")
+    try:
+        spec = inp.spec()
+        width, height, channels = int(spec.width), int(spec.height), int(spec.nchannels)
+        if width < 1 or height < 1 or int(spec.depth) > 1:
+            raise ValueError(f"{path.name} declares a {width}x{height}x{spec.depth} image, not a 2-D mosaic")
+        if width * height > max_pixels:
+            raise ValueError(
+                f"{path.name} is {width}x{height} = {width * height} pixels, more than the limit of {max_pixels}"
+            )
+        if spec.deep:
+            raise ValueError(f"{path.name} is a deep image (several samples per pixel), not a Bayer mosaic")
+        if channels not in (1, 3, 4):
+            raise ValueError(_layout_error(path, height, width, channels))
+        fmt = spec.format
+        declared_bits = spec.get_int_attribute("oiio:BitsPerSample", 0)
+        used = min(channels, 3)  # a fourth channel (alpha) is not looked at
+        data = np.empty((height, width), np.float32)
+        repeated = zeroed = used > 1
+        rows_per_band = max(1, _BAND_SAMPLES // (width * used))
+        tile = int(spec.tile_height) if int(spec.tile_width) > 0 else 0
+        if tile > 0:
+            rows_per_band = max(1, rows_per_band // tile) * tile
+        for y in range(0, height, rows_per_band):
+            rows = min(rows_per_band, height - y)
+            if tile > 0:
+                band = inp.read_tiles(0, 0, spec.x, spec.x + width, spec.y + y, spec.y + y + rows,
+                                      spec.z, spec.z + 1, 0, used, oiio.FLOAT)
+            else:
+                band = inp.read_scanlines(0, 0, spec.y + y, spec.y + y + rows, spec.z, 0, used, oiio.FLOAT)
+            if band is None or inp.has_error:
+                raise ValueError(f"cannot read image {path}: {one_line_error(inp.geterror()) or 'read failed'}")
+            band = np.asarray(band, dtype=np.float32)
+            if band.size != rows * width * used:
+                raise ValueError(f"cannot read image {path}: got {band.size} samples for rows {y}..{y + rows - 1}, "
+                                 f"expected {rows * width * used}")
+            band = band.reshape(rows, width, used)
+            plane = band[:, :, 0]
+            data[y:y + rows] = plane
+            if used > 1:
+                repeated = repeated and np.array_equal(band[:, :, 1], plane) and np.array_equal(band[:, :, 2], plane)
+                zeroed = zeroed and not np.any(band[:, :, 1:])
+                if not (repeated or zeroed):
+                    raise ValueError(_layout_error(path, height, width, channels))
+    finally:
+        inp.close()
+    return data, fmt, declared_bits
+
+
+def _layout_error(path: Path, height: int, width: int, channels: int) -> str:
+    return (
+        f"{path.name} has shape {height}x{width}x{channels}: a mosaic must have one "
         "channel, or 3/4 channels with the mosaic repeated in the first three (or only in the first, "
         "the others zero); this looks like an RGB image, not a Bayer mosaic"
     )
@@ -285,8 +326,13 @@ def _read_raw_mosaic(path: Path, pattern: str | None, max_pixels: int) -> Mosaic
 
     as_shot = None
     r, g, b = cam_mul[0], cam_mul[1], cam_mul[2]
-    if g > 0 and r > 0 and b > 0:
+    if all(math.isfinite(v) and v > 0 for v in (r, g, b)):
         as_shot = (r / g, 1.0, b / g)
+        if not all(math.isfinite(v) and v > 0 for v in as_shot):
+            as_shot = None
+    # A damaged file can hold NaN/Inf colour matrices: metadata we cannot use is metadata we do not have.
+    xyz_to_camera = xyz_to_camera if np.any(xyz_to_camera) and np.all(np.isfinite(xyz_to_camera)) else None
+    color_matrix = color_matrix if np.any(color_matrix) and np.all(np.isfinite(color_matrix)) else None
 
     return Mosaic(
         data=np.ascontiguousarray(data, dtype=np.float32),
@@ -295,8 +341,8 @@ def _read_raw_mosaic(path: Path, pattern: str | None, max_pixels: int) -> Mosaic
         black=black,
         white=white,
         as_shot_wb=as_shot,
-        xyz_to_camera=xyz_to_camera if np.any(xyz_to_camera) else None,
-        color_matrix=color_matrix if np.any(color_matrix) else None,
+        xyz_to_camera=xyz_to_camera,
+        color_matrix=color_matrix,
         noise_profile=tags.get("noise_profile"),
         source=str(path),
         bits=int(white).bit_length() if white >= 1 else None,
@@ -377,13 +423,19 @@ def _fix_dng_black_phase(black: list[float], cells: np.ndarray, sizes, tags: dic
     return fixed
 
 
+#: IFDs (and SubIFDs of each) that :func:`_tiff_tags` looks at.
+_MAX_TIFF_PAGES = 16
+
+
 def _tiff_tags(path: Path) -> dict:
     """Camera name, and for DNGs ActiveArea / BlackLevelRepeatDim / NoiseProfile, via tifffile.
 
     Best effort: anything tifffile cannot read (non-TIFF raws such as CRW, KDC,
     QTK; damaged files) gives an empty dict.
     """
+    import itertools
     import logging
+    import warnings
 
     out: dict = {}
     logger = logging.getLogger("tifffile")
@@ -392,12 +444,14 @@ def _tiff_tags(path: Path) -> dict:
     try:
         import tifffile
 
-        with tifffile.TiffFile(str(path)) as tif:
-            pages = list(tif.pages)
+        with warnings.catch_warnings(), tifffile.TiffFile(str(path)) as tif:
+            warnings.simplefilter("ignore")
+            # a damaged or hostile file can chain any number of IFDs: a DNG's raw is in the first few
+            pages = list(itertools.islice(tif.pages, _MAX_TIFF_PAGES))
             for page in list(pages):
                 sub = getattr(page, "pages", None)
                 if page.subifds and sub is not None:
-                    pages.extend(sub)
+                    pages.extend(itertools.islice(sub, _MAX_TIFF_PAGES))
 
             def tag(page, code):
                 t = page.tags.get(code)
@@ -411,6 +465,7 @@ def _tiff_tags(path: Path) -> dict:
             name = model if make and model.lower().startswith(make.lower()) else f"{make} {model}".strip()
             if not name and unique:
                 name = str(unique).strip()
+            name = "".join(c if c.isprintable() else " " for c in _one_line(name))[:200].strip()
             if name:
                 out["camera"] = name
             cfa = [p for p in pages if getattr(p, "photometric", None) == 32803 and not (int(p.subfiletype) & 1)]
@@ -427,6 +482,15 @@ def _tiff_tags(path: Path) -> dict:
             if raw_page is None:  # only trust DNG-specific placement for CFA files
                 out.pop("active_area", None)
                 out.pop("black_repeat", None)
+            # keep only well-formed values (a damaged file can hold anything)
+            if len(out.get("active_area", (0,) * 4)) != 4:
+                out.pop("active_area")
+            if len(out.get("black_repeat", (0,) * 2)) != 2:
+                out.pop("black_repeat")
+            profile = out.get("noise_profile")
+            if profile is not None and (len(profile) < 2 or len(profile) % 2
+                                        or not all(math.isfinite(v) for v in profile)):
+                out.pop("noise_profile")
     except Exception:  # noqa: BLE001 - metadata is optional; the pixels come from LibRaw
         return {k: v for k, v in out.items() if k == "camera"}
     finally:

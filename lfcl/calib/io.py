@@ -40,13 +40,43 @@ def calibration_to_dict(cal: Calibration) -> dict:
     }
 
 
+#: Largest ``cal.json`` read (a real one is tens of kB: the weight tables are small).
+MAX_FILE_BYTES = 64 * 2**20
+#: Largest magnitude of a number in ``cal.json`` (beyond it floats lose integers and
+#: arithmetic on them overflows; nothing in a calibration comes near it).
+MAX_NUMBER = 2.0**53
+
+
+def _bad_number(data):
+    """The first number in a JSON document that is not finite or is absurdly large, else None."""
+    stack = [data]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, dict):
+            stack.extend(item.values())
+        elif isinstance(item, list):
+            stack.extend(item)
+        elif isinstance(item, (int, float)) and not isinstance(item, bool):
+            if isinstance(item, float) and not math.isfinite(item):
+                return item
+            if abs(item) > MAX_NUMBER:
+                return item
+    return None
+
+
 def calibration_from_dict(data, name: str = "calibration") -> Calibration:
     """Validate a ``cal.json`` document; ``ValueError`` naming ``name`` and the problem."""
+    from ..raw import MAX_PIXELS
+
     def fail(msg):
         raise ValueError(f"{name}: {msg}")
 
     if not isinstance(data, dict):
         fail("not a calibration (expected a JSON object)")
+    bad = _bad_number(data)
+    if bad is not None:
+        text = repr(bad) if isinstance(bad, float) else f"a {len(str(abs(bad)))}-digit integer"
+        fail(f"holds the number {text}: every number in a calibration must be finite and below {MAX_NUMBER:.0e}")
     if data.get("format") != FORMAT:
         fail(f"not an lfcl calibration (format {data.get('format')!r}, expected {FORMAT!r})")
     version = data.get("version")
@@ -60,6 +90,11 @@ def calibration_from_dict(data, name: str = "calibration") -> Calibration:
     if (not isinstance(shape, list) or len(shape) != 2
             or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in shape)):
         fail(f"sensor_shape must be [rows, cols] of positive integers, got {shape!r}")
+    if shape[0] * shape[1] > MAX_PIXELS:
+        fail(f"sensor_shape {shape[0]}x{shape[1]} is more than the {MAX_PIXELS}-pixel limit of any raw lfcl reads")
+    for key, kind in (("source", str), ("fit", dict)):
+        if data.get(key) is not None and not isinstance(data[key], kind):
+            fail(f"{key} must be {'a string' if kind is str else 'an object'} or null, got {type(data[key]).__name__}")
     try:
         grid = LensGrid.from_dict(data.get("grid"))
     except ValueError as exc:
@@ -70,9 +105,13 @@ def calibration_from_dict(data, name: str = "calibration") -> Calibration:
         fail(f"the grid's pitch {stated!r} disagrees with its steps ({grid.pitch:.4f} px)")
     if grid.pitch < 2 or grid.pitch > max(shape):
         fail(f"implausible lens pitch {grid.pitch:.4g} px for a {shape[0]}x{shape[1]} sensor")
+    reach = 8 * max(shape)  # lens (0, 0) farther than this from the sensor: not a grid of this sensor
+    if not all(abs(v) <= reach for v in grid.origin):
+        fail(f"the grid's origin {list(grid.origin)} is implausibly far from the {shape[0]}x{shape[1]} sensor")
     weight = data.get("weight")
     try:
-        weight = None if weight is None else WeightModel.from_dict(weight)
+        with np.errstate(over="ignore", invalid="ignore"):  # out-of-range tables are refused by the model
+            weight = None if weight is None else WeightModel.from_dict(weight)
         return Calibration(grid=grid, sensor_shape=tuple(shape), pattern=data.get("pattern"), weight=weight,
                            fit=data.get("fit"), source=data.get("source"), version=version)
     except ValueError as exc:
@@ -82,16 +121,30 @@ def calibration_from_dict(data, name: str = "calibration") -> Calibration:
 def load_calibration(path, sensor_shape=None, pattern: str | None = None) -> Calibration:
     """Read and validate ``cal.json``; with ``sensor_shape``/``pattern``, refuse another sensor's calibration."""
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise FileNotFoundError(f"calibration {str(path)!r} does not exist")
+    if not path.is_file():
+        raise ValueError(f"calibration {str(path)!r} is not a file")
+    size = path.stat().st_size
+    if size > MAX_FILE_BYTES:
+        raise ValueError(f"{path}: {size} bytes is too large for a calibration (at most {MAX_FILE_BYTES})")
+    raw = path.read_bytes()
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(raw, parse_constant=_refuse_constant)
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    except RecursionError:
+        raise ValueError(f"{path}: not a calibration (JSON nested too deeply)") from None
+    except ValueError as exc:  # NaN / Infinity, or an integer too long for Python to convert
+        raise ValueError(f"{path}: not valid JSON ({' '.join(str(exc).split())})") from None
     cal = calibration_from_dict(data, str(path))
     if sensor_shape is not None:
         cal.check(sensor_shape, pattern)
     return cal
+
+
+def _refuse_constant(name: str):
+    raise ValueError(f"{name} is not a JSON number")
 
 
 _NUMBER_LIST = re.compile(r"\[\s*((?:-?[0-9][0-9.eE+-]*|null)(?:,\s*(?:-?[0-9][0-9.eE+-]*|null))*)\s*\]")
