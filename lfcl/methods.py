@@ -86,6 +86,13 @@ class DemosaicResult:
     noise: NoiseEstimate | None
 
 
+def _check_finite(planes: np.ndarray, what: str, mosaic: np.ndarray):
+    """A finite input can still overflow float32 (values near 3e38): say so, never return Inf."""
+    if not np.all(np.isfinite(planes)):
+        raise ValueError(f"{what} overflowed float32: the mosaic's values reach {float(np.abs(mosaic).max()):.3g}; "
+                         "a normalised raw should lie near [0, 1]")
+
+
 def lens_row_bands(lens_rows: int, per_row: tuple[int, int], limits: tuple[int, int]) -> list[tuple[int, int]]:
     """Split ``lens_rows`` into bands [s0, s1) that fit the device.
 
@@ -130,10 +137,15 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     x0 = Malvar(runtime, mosaic.shape, pattern, origin).forward(b)
     if method == "malvar":
         planes = x0.get()
+        _check_finite(planes, "malvar", mosaic)
         return DemosaicResult(planes, method, {}, 0, time.perf_counter() - start, "direct", [], None)
-    if noise is None:
+    _check_finite(x0.get(), "the Malvar start", mosaic)
+    defaults = ADMM_DEFAULTS[method]
+    needs_sigma = lam is None or (iterations is None and defaults.change_per_sigma > 0)
+    if noise is None and needs_sigma:
         noise = estimate_noise(raw_mosaic, pattern, pitch, origin)  # the noise of the raw, as lambda expects
-    params = admm_params(method, noise.sigma, lam=lam, iterations=iterations, rho=rho, strength=strength)
+    sigma = noise.sigma if noise is not None else 0.0  # unused when lam and iterations are given
+    params = admm_params(method, sigma, lam=lam, iterations=iterations, rho=rho, strength=strength)
     dims = ADMM_DEFAULTS[method].dims
     H, W = mosaic.shape
     budget = int(max_memory) if max_memory is not None else int(0.8 * runtime.device.global_mem_size)

@@ -5,8 +5,10 @@ is a ValueError and a solver that overflows a FloatingPointError, each naming th
 problem, never a silent garbage image; the float32 device solver agrees with the
 float64 numpy reference within the tolerances of ``stress.x_tolerance`` and
 ``stress.history_errors`` (measured, with their reasons, in their docstrings); the same
-input on the same device gives the same bytes. The xfail(strict=True) tests pin defects
-outside this suite's files; each reason says where.
+input on the same device gives the same bytes. The suite found three defects (Malvar
+overflow returned Inf; a noise estimate demanded when lambda and iterations were given;
+the exact lens solve zeroing colours a lens does not measure); the tests that pinned
+them now pass.
 """
 
 from __future__ import annotations
@@ -97,8 +99,6 @@ def test_admm_overflow_is_a_clear_floating_point_error(method):
     assert_contract(stress.run_case(c, method, repeat=False))
 
 
-@pytest.mark.xfail(strict=True, reason="lfcl/methods.py demosaic_lightfield('malvar') returns Inf planes for a finite "
-                                       "3e38 pixel: the Malvar branch returns x0.get() with no finiteness check")
 def test_malvar_never_returns_inf_for_finite_input():
     c = case("input", "one pixel at 3e38")
     try:
@@ -163,9 +163,7 @@ def test_small_and_odd_light_fields(name, method):
 
 @pytest.mark.parametrize("method", [
     "malvar", "admm-st", "admm-uvst",
-    pytest.param("admm-uv", marks=pytest.mark.xfail(
-        strict=True, reason="lfcl/solvers/admm.py lens_block_inverses: pinv of a colour a lens does not measure "
-                            "zeroes it; pitch-1 admm-uv returns 2/3 of the samples as 0")),
+    "admm-uv",
 ])
 def test_pitch_1_keeps_the_contract(method):
     assert_contract(stress.run_case(case("shape", PITCH_1), method))
@@ -178,8 +176,6 @@ def test_one_lens_without_noise_profile_is_a_clear_error_with_defaults():
             demosaic_lightfield(c.mosaic, c.pattern, c.pitch, method)
 
 
-@pytest.mark.xfail(strict=True, reason="lfcl/methods.py demosaic_lightfield estimates the noise even when lam and "
-                                       "iterations are given, so 1x1 lenses / pitch < 4 raise 'too few lenses'")
 @pytest.mark.parametrize("method", ADMM_METHODS)
 def test_explicit_lambda_and_iterations_need_no_noise_estimate(method):
     c = case("shape", "1x1 lenses, no noise profile, lam+iterations")
@@ -247,17 +243,13 @@ def test_vignetted_lens_response(method):
 
 @pytest.mark.parametrize("method", [
     "malvar", "admm-st", "admm-uvst",
-    pytest.param("admm-uv", marks=pytest.mark.xfail(
-        strict=True, reason="lfcl/solvers/admm.py lens_block_inverses: with one weighted pixel per lens the pinv "
-                            "zeroes the 2 unmeasured colours; admm-uv channel means fall ~70 %")),
+    "admm-uv",
 ])
 def test_one_usable_pixel_per_lens(method):
     assert_contract(stress.run_case(case("weights", "lens response: one usable pixel per lens"), method,
                                     repeat=False))
 
 
-@pytest.mark.xfail(strict=True, reason="lfcl/solvers/admm.py lens_block_inverses: the exact x-update's pinv drops "
-                                       "the warm start's null-space part (colours a lens lacks); CG keeps it")
 @pytest.mark.parametrize("pitch", [(1, 1), (1, 2)])
 def test_exact_lens_solve_agrees_with_cg_when_a_lens_lacks_a_colour(runtime, pitch):
     from lfcl.ops.malvar import malvar_np

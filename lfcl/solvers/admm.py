@@ -165,10 +165,29 @@ class AdmmSolver:
         )
         return out
 
+    def _every_lens_sees_every_colour(self) -> bool:
+        """Whether every lens has a weighted sample of each colour, whatever its Bayer parity.
+
+        If not, that colour's block is singular (its constant part is free) and the
+        exact solve would zero it, while CG keeps the warm start's: CG is used then.
+        """
+        weights = np.asarray(self._weights_key).reshape(self.U, self.V) > 0
+        for ps in range(2):
+            for pt in range(2):
+                colours = channel_map((self.U, self.V), self.pattern, (self.origin[0] + ps, self.origin[1] + pt))
+                if any(not np.any((colours == c) & weights) for c in range(3)):
+                    return False
+        return True
+
     def _uses_lens_solve(self, params: AdmmParams) -> bool:
-        if params.x_update == "lens" and self.dims != ("u", "v"):
-            raise ValueError(f"x_update 'lens' needs a prior over (u, v) only, not {''.join(self.dims)}")
-        return params.x_update == "lens" or (params.x_update == "auto" and self.dims == ("u", "v"))
+        if params.x_update == "lens":
+            if self.dims != ("u", "v"):
+                raise ValueError(f"x_update 'lens' needs a prior over (u, v) only, not {''.join(self.dims)}")
+            if not self._every_lens_sees_every_colour():
+                raise ValueError("x_update 'lens' needs every lens to measure every colour: with this pitch "
+                                 "or these lens weights some lens has none of one colour (use 'cg' or 'auto')")
+            return True
+        return params.x_update == "auto" and self.dims == ("u", "v") and self._every_lens_sees_every_colour()
 
     def lens_solve(self, rhs, x, rho):
         """x = (A^T A + rho D_uv^T D_uv)^-1 rhs, exactly, lens by lens."""
