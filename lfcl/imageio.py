@@ -22,10 +22,18 @@ class ImageReadError(ValueError):
 
 @contextlib.contextmanager
 def atomic_path(path, suffix: str | None = None):
-    """Yield a temporary path beside ``path``; rename it onto ``path`` on success."""
+    """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
+
+    On failure the temporary file is removed, and so are the folders made for it.
+    """
     path = Path(path)
+    made = [folder for folder in (path.parent, *path.parent.parents) if not folder.exists()]
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=suffix or path.suffix, dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=suffix or path.suffix, dir=path.parent)
+    except BaseException:
+        _remove_empty(made)
+        raise
     os.close(fd)
     try:
         yield Path(tmp)
@@ -37,7 +45,15 @@ def atomic_path(path, suffix: str | None = None):
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        _remove_empty(made)
         raise
+
+
+def _remove_empty(folders) -> None:
+    """Remove ``folders`` (deepest first) that are still empty; leave the others."""
+    for folder in folders:
+        with contextlib.suppress(OSError):
+            folder.rmdir()
 
 
 def one_line_error(text, limit: int = 400) -> str:
@@ -51,10 +67,20 @@ def one_line_error(text, limit: int = 400) -> str:
     return joined if len(joined) <= limit else joined[: limit - 3].rstrip() + "..."
 
 
+def _check_name(path: Path) -> None:
+    """OpenImageIO takes UTF-8 file names only: ``ValueError`` for another (a Linux name can be any bytes)."""
+    try:
+        str(path).encode("utf-8")
+    except UnicodeEncodeError:
+        raise ValueError(f"cannot use {str(path)!r}: its name is not valid UTF-8 (choose another)") from None
+
+
 def read_image(path) -> np.ndarray:
     """Any image OpenImageIO reads, as float32 ``(H, W, C)``; ``ImageReadError`` (one line) if it cannot."""
-    from .raw import _captured_stderr  # image libraries (libpng) print on fd 2 before OIIO reports
+    # image libraries (libpng) print on fd 2 before OpenImageIO reports the error
+    from .raw import _captured_stderr
 
+    _check_name(Path(path))
     with _captured_stderr():
         buf = oiio.ImageBuf(str(path))
         if buf.has_error:
@@ -81,6 +107,7 @@ def write_image(path, image: np.ndarray, metadata: dict | None = None, *, pixel_
     field TIFF keeps).
     """
     path = Path(path)
+    _check_name(path)
     fmt = pixel_format if pixel_format is not None else _FORMATS.get(path.suffix.lower())
     if fmt is None:
         raise ValueError(f"unsupported output extension {path.suffix!r}: use .exr, .tif, .tiff or .png")

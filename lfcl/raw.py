@@ -15,11 +15,17 @@ Two routes:
   it in the first channel with the others all zero (the layout of
   colour-demosaicing's Lighthouse ``*_CFA_*.exr`` files). Their pattern has to be
   given. Integer files are normalised by their type's maximum (OpenImageIO does
-  that when it reads them as float); float files are taken as they are.
+  that when it reads them as float); float files are taken as they are. A file
+  must hold the format its extension names (a DNG renamed .exr is refused, not
+  read as a TIFF without its black level).
 
 Every failure a user can cause (missing, unsupported, corrupt or truncated file,
 non-Bayer sensor, wrong pattern, image too large) is a ``ValueError`` (or
-``FileNotFoundError``) with a one-line message.
+``FileNotFoundError``) with a one-line message. The size a header declares is
+checked against ``max_pixels`` before any pixel is allocated, and an image file
+is read in bands, so the one full-size array is the float32 result; metadata a
+damaged file holds that cannot be used (non-finite colour matrices, white
+balance or noise profile) is dropped, as if absent.
 """
 
 from __future__ import annotations
@@ -41,6 +47,12 @@ MAX_PIXELS = 2**28
 
 #: Extensions read through OpenImageIO; everything else goes to LibRaw.
 IMAGE_EXTENSIONS = frozenset({".exr", ".tif", ".tiff", ".png", ".pgm", ".ppm", ".pnm", ".pfm", ".hdr"})
+
+#: The OpenImageIO format each image extension must hold (OpenImageIO itself would read a
+#: file with any reader that takes it: a DNG named .exr would be read as a TIFF, without
+#: its black level).
+IMAGE_FORMATS = {".exr": "openexr", ".tif": "tiff", ".tiff": "tiff", ".png": "png", ".pgm": "pnm",
+                 ".ppm": "pnm", ".pnm": "pnm", ".pfm": "pnm", ".hdr": "hdr"}
 
 _RAW_INDEX_NAMES = ("R", "G", "B", "G2")
 
@@ -136,9 +148,19 @@ def read_mosaic(path, pattern: str | None = None, *, max_pixels: int = MAX_PIXEL
         raise FileNotFoundError(f"input file {str(path)!r} does not exist")
     if not path.is_file():
         raise ValueError(f"input {str(path)!r} is not a file")
-    if path.suffix.lower() in IMAGE_EXTENSIONS:
-        return _read_image_mosaic(path, pattern, max_pixels)
-    return _read_raw_mosaic(path, pattern, max_pixels)
+    try:
+        str(path).encode("utf-8")
+    except UnicodeEncodeError:  # LibRaw and OpenImageIO take UTF-8 names only
+        raise ValueError(f"cannot read {str(path)!r}: its name is not valid UTF-8 (rename the file)") from None
+    try:
+        if path.suffix.lower() in IMAGE_EXTENSIONS:
+            return _read_image_mosaic(path, pattern, max_pixels)
+        return _read_raw_mosaic(path, pattern, max_pixels)
+    except ValueError as exc:  # one line, even for a file name with a line break in it
+        text = str(exc)
+        if "\n" in text or "\r" in text:
+            raise ValueError(_one_line(text)) from None
+        raise
 
 
 # --------------------------------------------------------------------------- images
@@ -196,6 +218,12 @@ def _read_image_plane(path: Path, max_pixels: int):
     if inp is None:
         raise ValueError(f"cannot read image {path}: {one_line_error(oiio.geterror()) or 'unknown format'}")
     try:
+        expected, actual = IMAGE_FORMATS.get(path.suffix.lower()), inp.format_name()
+        if expected is not None and actual != expected:
+            raise ValueError(
+                f"{path.name} holds a {actual} image, not the {expected} its extension says: give it its real extension "
+                "(a DNG or camera raw must keep its raw extension to be read with its black and white levels)"
+            )
         spec = inp.spec()
         width, height, channels = int(spec.width), int(spec.height), int(spec.nchannels)
         if width < 1 or height < 1 or int(spec.depth) > 1:

@@ -64,6 +64,20 @@ def _bad_number(data):
     return None
 
 
+def _all_numbers(value) -> bool:
+    """``value`` is a number or a (nested, non-empty) list of numbers only: no strings, booleans or nulls."""
+    stack = [value]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, list):
+            if not item:
+                return False
+            stack.extend(item)
+        elif isinstance(item, bool) or not isinstance(item, (int, float)):
+            return False
+    return True
+
+
 def calibration_from_dict(data, name: str = "calibration") -> Calibration:
     """Validate a ``cal.json`` document; ``ValueError`` naming ``name`` and the problem."""
     from ..raw import MAX_PIXELS
@@ -95,8 +109,23 @@ def calibration_from_dict(data, name: str = "calibration") -> Calibration:
     for key, kind in (("source", str), ("fit", dict)):
         if data.get(key) is not None and not isinstance(data[key], kind):
             fail(f"{key} must be {'a string' if kind is str else 'an object'} or null, got {type(data[key]).__name__}")
+    grid_data = data.get("grid")
+    if isinstance(grid_data, dict):
+        for key in ("origin", "row_step", "col_step"):
+            value = grid_data.get(key)
+            if value is not None and not (isinstance(value, list) and len(value) == 2 and _all_numbers(value)):
+                fail(f"bad grid ({key} must be two numbers [row, col], got {value!r})")
+    weight = data.get("weight")
+    if isinstance(weight, dict):
+        local, glob = weight.get("local"), weight.get("global")
+        for key, value in (("peak", weight.get("peak")), ("valid_threshold", weight.get("valid_threshold", 0.2)),
+                           ("local step_px", local.get("step_px") if isinstance(local, dict) else None),
+                           ("local table", local.get("table") if isinstance(local, dict) else None),
+                           ("global table", glob.get("table") if isinstance(glob, dict) else None)):
+            if value is not None and not _all_numbers(value):
+                fail(f"the weight model's {key} must hold numbers only")
     try:
-        grid = LensGrid.from_dict(data.get("grid"))
+        grid = LensGrid.from_dict(grid_data)
     except ValueError as exc:
         fail(f"bad grid ({exc})")
     stated = data["grid"].get("pitch")
@@ -108,7 +137,6 @@ def calibration_from_dict(data, name: str = "calibration") -> Calibration:
     reach = 8 * max(shape)  # lens (0, 0) farther than this from the sensor: not a grid of this sensor
     if not all(abs(v) <= reach for v in grid.origin):
         fail(f"the grid's origin {list(grid.origin)} is implausibly far from the {shape[0]}x{shape[1]} sensor")
-    weight = data.get("weight")
     try:
         with np.errstate(over="ignore", invalid="ignore"):  # out-of-range tables are refused by the model
             weight = None if weight is None else WeightModel.from_dict(weight)
