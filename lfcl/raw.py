@@ -144,10 +144,16 @@ def read_mosaic(path, pattern: str | None = None, *, max_pixels: int = MAX_PIXEL
     if pattern is not None:
         pattern = parse_pattern(pattern)
     path = Path(path)
-    if not path.exists():
+    try:
+        exists = path.exists()
+    except PermissionError:  # a folder on the way is closed to us
+        raise ValueError(f"cannot read {str(path)!r}: permission denied") from None
+    if not exists:
         raise FileNotFoundError(f"input file {str(path)!r} does not exist")
     if not path.is_file():
         raise ValueError(f"input {str(path)!r} is not a file")
+    if not os.access(path, os.R_OK):
+        raise ValueError(f"cannot read {str(path)!r}: permission denied")
     try:
         str(path).encode("utf-8")
     except UnicodeEncodeError:  # LibRaw and OpenImageIO take UTF-8 names only

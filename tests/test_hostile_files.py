@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import json
 import math
+import contextlib
 import os
+import tempfile
 import struct
 import subprocess
 import sys
@@ -462,17 +464,13 @@ def test_directory_is_refused(tmp_path):
         load_calibration(folder)
 
 
-@pytest.mark.xfail(reason="click rejects a directory INPUT at parse time (Path(dir_okay=False) in "
-                          "lfcl/commands/{demosaic,process,calibrate}.py): a usage error, exit 2, several lines "
-                          "and no 'lfcl: error:' prefix", strict=False)
 @pytest.mark.parametrize("command", ["demosaic", "process", "calibrate", "process --calibration"])
 def test_directory_through_the_cli(tmp_path, seeds, command):
     folder = tmp_path / "folder.dng"
     folder.mkdir()
     out = tmp_path / "out"
     if command == "process --calibration":
-        if not process_has_calibration():
-            pytest.skip("lfcl process has no --calibration option (yet)")
+        assert process_has_calibration()
         raw = tmp_path / "raw.dng"
         raw.write_bytes(seeds["dng"])
         args = ["process", raw, "-o", out / "result", "--method", "malvar", "--calibration", folder]
@@ -510,18 +508,75 @@ def test_awkward_file_names(tmp_path, seeds):
     assert_cli_error(["demosaic", good, "-o", target], tmp_path / "out", match="not valid UTF-8")
 
 
-@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0,
-                    reason="running as root: file permissions do not stop root from reading")
+def _as_unprivileged(check, warm_up):
+    """Run ``check()`` where file permissions bind: in a forked child that drops to
+    uid/gid 65534 ("nobody") when the tests run as root; returns its error text or None.
+
+    ``warm_up()`` runs first in this process, so that every module the code path imports
+    lazily is loaded before the child loses access to the root-owned installation."""
+    if os.geteuid() != 0:
+        try:
+            check()
+        except AssertionError as exc:
+            return str(exc) or "assertion failed"
+        return None
+    warm_up()
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: no pytest machinery from here on, only os._exit
+        os.close(read)
+        message = b""
+        try:
+            os.setgid(65534)
+            os.setuid(65534)
+            check()
+        except BaseException as exc:  # noqa: BLE001 (report anything to the parent)
+            import traceback
+
+            message = "".join(traceback.format_exception(exc)).encode() or b"failed"
+        os.write(write, message)
+        os._exit(0)
+    os.close(write)
+    with os.fdopen(read, "rb") as pipe:
+        message = pipe.read().decode()
+    os.waitpid(pid, 0)
+    return message or None
+
+
+@pytest.fixture
+def open_folder():
+    """A folder anyone may enter (pytest's own tmp_path sits under a private 0700 folder)."""
+    with tempfile.TemporaryDirectory(prefix="lfcl-perm-") as folder:
+        os.chmod(folder, 0o777)  # writable too: the commands may create their output folder
+        yield Path(folder)
+
+
 @pytest.mark.parametrize("kind", SEEDS)
-def test_unreadable_file(tmp_path, seeds, kind):
+def test_unreadable_file(open_folder, seeds, kind):
+    tmp_path = open_folder  # the unprivileged reader may enter the folder but not read the file
     path = tmp_path / f"locked.{kind}"
     path.write_bytes(seeds[kind])
     path.chmod(0)
-    try:
+    out = tmp_path / "out"
+
+    def check():
         assert_refused(path, match=path.name)
-        out = tmp_path / "out"
         for args, _ in cli_commands(path, out):
             assert_cli_error(args, out)
+
+    readable = tmp_path / f"open.{kind}"
+    readable.write_bytes(seeds[kind])
+
+    def warm_up():  # the same commands on a readable copy (they may succeed or fail)
+        import click._textwrap  # noqa: F401 (click formats its messages with it, lazily)
+
+        with contextlib.suppress(Exception):
+            read_mosaic(readable, "GRBG")
+        for args, _ in cli_commands(readable, tmp_path / "warm"):
+            invoke(args)
+
+    try:
+        assert _as_unprivileged(check, warm_up) is None
     finally:
         path.chmod(0o644)
 

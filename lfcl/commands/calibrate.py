@@ -32,10 +32,10 @@ def _parse_offset(value: str) -> tuple[float, float]:
 
 
 @click.command("calibrate")
-@click.argument("white", required=False, type=click.Path(dir_okay=False, path_type=Path), metavar="[WHITE]")
-@click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.argument("white", required=False, type=click.Path(path_type=Path, readable=False), metavar="[WHITE]")
+@click.option("-o", "--output", "output", required=True, type=click.Path(path_type=Path, readable=False),
               metavar="CAL.json", help="The calibration file to write.")
-@click.option("--export-centers", "export_centers", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--export-centers", "export_centers", type=click.Path(path_type=Path, readable=False), default=None,
               metavar="FILE.csv", help="Also write every lens centre on the sensor as row,col (pixels) with a header.")
 @click.option("--packing", default="auto", show_default=True, metavar="auto|square|hex",
               help="Lens packing; with a white image 'auto' detects it, a named one must match it.")

@@ -24,14 +24,14 @@ OUTPUT_EXTENSIONS = (".exr", ".tif", ".tiff", ".png")
 
 
 @click.command("demosaic")
-@click.argument("input_path", metavar="INPUT", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("input_path", metavar="INPUT", type=click.Path(path_type=Path, readable=False))
 @click.option("--pattern", default=None, metavar="PATTERN",
               help="Bayer pattern of the mosaic's first 2x2 pixels: RGGB, GRBG, GBRG or BGGR. "
                    "Required for image files; read from raws (and checked if given).")
 @click.option("--method", type=click.Choice(METHODS), default="malvar", show_default=True,
               help="Demosaicing method (Malvar-He-Cutler 2004).")
 @click.option("-o", "--output", "output_path", required=True, metavar="OUT",
-              type=click.Path(dir_okay=False, path_type=Path),
+              type=click.Path(path_type=Path, readable=False),
               help="Output image: .exr (float, unclipped), .tif/.tiff (16-bit) or .png (8-bit).")
 @device_option
 @user_errors

@@ -111,7 +111,7 @@ def _progress_bar(method: str, iterations, as_json: bool):
 
 
 @click.command("process")
-@click.argument("raw", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("raw", type=click.Path(path_type=Path, readable=False))
 @click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output folder (created if missing).")
 @click.option("--method", default="admm-uv", show_default=True,
@@ -119,9 +119,9 @@ def _progress_bar(method: str, iterations, as_json: bool):
 @click.option("--pitch", default=None, type=click.IntRange(min=2), show_default=str(DEFAULT_PITCH),
               help="Pixels per microlens of an aligned square grid starting at the sensor's first pixel "
                    "(not with --calibration / --white).")
-@click.option("--calibration", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="CAL.json",
+@click.option("--calibration", type=click.Path(path_type=Path, readable=False), default=None, metavar="CAL.json",
               help="Lens grid from `lfcl calibrate`: pitch and first lens from it (aligned square grids only).")
-@click.option("--white", type=click.Path(dir_okay=False, path_type=Path), default=None, metavar="WHITE",
+@click.option("--white", type=click.Path(path_type=Path, readable=False), default=None, metavar="WHITE",
               help="Calibrate from this white image first (as `lfcl calibrate WHITE`), then as --calibration.")
 @click.option("--pattern", default=None, help="Bayer pattern; required for EXR/TIFF/PNG mosaics, read from raws.")
 @click.option("--outputs", default=DEFAULT_OUTPUTS, show_default=True,
