@@ -417,3 +417,19 @@ def test_write_white_capture_replaces_files(tmp_path):
     write_white_capture(simulate_white("hex", 9.5, sensor_shape=(60, 60)), out)
     assert (out / "keep.txt").read_text() == "mine" and (out / "white.dng").stat().st_size > 100
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--pitch", "1e300", "--sensor-shape", "90x90"], "pitch must be a finite number"),
+    (["--pitch", "9", "--offset=1e300,0", "--sensor-shape", "90x90"], "offset row must be a finite number"),
+    (["--pitch", "9", "--sensor-shape", "100000000x100000000"], "outside 1 .."),
+])
+def test_absurd_grid_parameters_are_one_line_errors(tmp_path, args, message):
+    from click.testing import CliRunner
+
+    from lfcl.cli import cli
+
+    result = CliRunner().invoke(cli, ["calibrate", *args, "-o", str(tmp_path / "cal.json")])
+    assert result.exit_code == 1 and message in result.output
+    assert len(result.output.strip().splitlines()) == 1
+    assert not (tmp_path / "cal.json").exists()

@@ -588,6 +588,15 @@ def calibrate_white(path, pattern: str | None = None, **kwargs) -> Calibration:
 def calibration_from_pitch(pitch: float, sensor_shape, packing: str = "square", rotation_deg: float = 0.0,
                            offset=(0.0, 0.0), pattern: str | None = None) -> Calibration:
     """A calibration from the grid parameters alone (no white image, uniform weight)."""
+    from ..raw import MAX_PIXELS
+
+    values = {"pitch": pitch, "rotation": rotation_deg, "offset row": offset[0], "offset column": offset[1]}
+    for name, value in values.items():
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and abs(value) <= 1e6):
+            raise ValueError(f"{name} must be a finite number of at most 1e6, got {value!r}")
+    H, W = (int(v) for v in sensor_shape)
+    if H < 1 or W < 1 or H * W > MAX_PIXELS:
+        raise ValueError(f"sensor shape {H}x{W} is outside 1 .. {MAX_PIXELS} pixels")
     grid = LensGrid.from_params("square" if packing == "auto" else packing, pitch, rotation_deg, offset)
     cal = Calibration(grid=grid, sensor_shape=tuple(sensor_shape), pattern=pattern, weight=None,
                       fit={"method": "from parameters (no white image)"}, source=None)
