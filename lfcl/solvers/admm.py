@@ -217,17 +217,18 @@ class AdmmSolver:
         vec.axpby(1.0, rhs, -1.0, q, r)  # r = rhs - M x
         self.precondition(r, pz, rho)
         vec.copy(pz, p)
-        rz = red.dot(r, pz)
-        rhs_norm = math.sqrt(red.norm2(rhs))
+        # one host round trip per reduction point: (r.Pr, |r|^2) together, |rhs|^2 with them
+        rz, r2, rhs2 = red.many(("dot", r, pz), ("norm2", r), ("norm2", rhs))
+        threshold2 = tol * tol * rhs2
         for step in range(max_steps):
-            if math.sqrt(red.norm2(r)) <= tol * rhs_norm or rz == 0:
+            if r2 <= threshold2 or rz == 0:
                 return step
             self.normal(p, q, rho)
             alpha = rz / red.dot(p, q)
             vec.axpby(1.0, x, alpha, p, x)
             vec.axpby(1.0, r, -alpha, q, r)
             self.precondition(r, pz, rho)
-            rz_next = red.dot(r, pz)
+            rz_next, r2 = red.many(("dot", r, pz), ("norm2", r))
             vec.axpby(1.0, pz, rz_next / rz, p, p)
             rz = rz_next
         return max_steps
