@@ -141,12 +141,49 @@ def _progress_bar(method: str, iterations, as_json: bool):
 @click.option("--max-memory", default=None, type=click.FloatRange(min=0.01), metavar="GIB",
               help="Device memory the solver may use, GiB; default 80% of the device's. A larger admm-uv "
                    "problem runs in bands of lens rows (exact: the (u, v) prior couples no two lenses).")
+@click.option("--pipeline", "pipeline", default=None, metavar="NAME|PATH",
+              help="A recipe (default, lowlight, preview, or a .toml file; docs/stages.md) supplying defaults for "
+                   "--method, --strength, --lambda, --iterations, --outputs, --refocus, --format, --previews; "
+                   "options given on the command line win.")
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON (no progress bar).")
 @device_option
 @user_errors
 def command(raw, out_dir, method, pitch, calibration, white, pattern, outputs, refocus_spec, fmt, previews, lam,
-            iterations, strength, max_memory, as_json, device):
+            iterations, strength, max_memory, pipeline, as_json, device):
     """Demosaic a lenslet RAW (DNG, camera raw, or EXR/TIFF/PNG mosaic) into a 4D light field."""
+    recipe_meta = None
+    if pipeline is not None:  # the recipe's values replace the options not given explicitly
+        from click.core import ParameterSource
+
+        from ..recipes import load_recipe
+
+        recipe = load_recipe(pipeline)
+        ctx = click.get_current_context()
+        explicit = {p for p in ("method", "strength", "lam", "iterations", "outputs", "refocus_spec", "fmt",
+                                "previews") if ctx.get_parameter_source(p) not in (ParameterSource.DEFAULT,
+                                                                                  ParameterSource.DEFAULT_MAP)}
+        if "method" not in explicit:
+            method = recipe["method"]
+        if "strength" not in explicit:
+            strength = recipe["strength"]
+        if "lam" not in explicit:
+            lam = recipe["lambda"]
+        if "iterations" not in explicit:
+            iterations = recipe["iterations"]
+        if "outputs" not in explicit:
+            outputs = ",".join(recipe["outputs"])
+        if "refocus_spec" not in explicit and "refocus" in recipe["outputs"]:
+            refocus_spec = recipe["refocus"]
+        if "fmt" not in explicit:
+            fmt = recipe["format"]
+        if "previews" not in explicit:
+            previews = recipe["previews"]
+        recipe_meta = {"name": recipe["name"], "path": recipe["path"],
+                       "options": {"method": method, "strength": strength, "lambda": lam,
+                                   "iterations": iterations, "outputs": outputs, "refocus": refocus_spec,
+                                   "format": fmt, "previews": previews},
+                       "from_command_line": sorted({"lam": "lambda", "refocus_spec": "refocus",
+                                                    "fmt": "format"}.get(p, p) for p in explicit)}
     from .. import __version__
     from ..layout import LightFieldShape, planes_to_exchange
     from ..outputs import (
@@ -239,6 +276,8 @@ def command(raw, out_dir, method, pitch, calibration, white, pattern, outputs, r
         "noise_sigma": None if result.noise is None else result.noise.sigma,
         "input": mosaic.metadata(), "generator": f"lfcl {__version__} process",
     }
+    if recipe_meta is not None:
+        metadata["recipe"] = recipe_meta
     if cal_meta is not None:
         metadata["calibration"] = cal_meta
     if lens_response is not None:

@@ -1,0 +1,183 @@
+"""lfcl.stages / lfcl.recipes and `lfcl process --pipeline` (docs/stages.md)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from lfcl.cli import cli
+from lfcl.recipes import DEFAULTS, PACKAGED, load_recipe, pipeline_from_recipe
+from lfcl.stages import Decode, Demosaic, Demosaiced, Grid, Gridded, Outputs, Pipeline
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    from lfcl.sim import simulate, write_capture
+
+    out = tmp_path_factory.mktemp("stages") / "capture"
+    write_capture(simulate("deadleaves", lenses=(12, 14), lux=4, seed=3), out)
+    return out / "raw.dng"
+
+
+def expected_files(recipe: dict) -> set:
+    ext = {"exr": ".exr", "tiff": ".tif"}[recipe["format"]]
+    names = {"summary.json"}
+    for kind in recipe["outputs"]:
+        if kind == "lightfield":
+            names.add("lightfield.npy")
+        else:
+            assert kind in ("center", "mean", "views")  # what the packaged recipes use
+            names.add(kind + ext)
+            if recipe["previews"]:
+                names.add(kind + ".png")
+    return names
+
+
+@pytest.mark.parametrize("name", PACKAGED)
+def test_each_packaged_recipe_writes_its_outputs(name, capture, tmp_path):
+    recipe = load_recipe(name)
+    out = tmp_path / name
+    summary = pipeline_from_recipe(recipe).run(capture, out)
+    assert {p.name for p in out.iterdir()} == expected_files(recipe)
+    assert summary["method"] == recipe["method"]
+    assert summary["recipe"]["name"] == name
+    assert summary["options"]["strength"] == recipe["strength"]
+    assert summary["options"]["outputs"] == recipe["outputs"]
+    assert set(summary["seconds"]) == {"decode", "grid", "demosaic", "outputs"}
+    assert json.loads((out / "summary.json").read_text())["options"] == summary["options"]
+    assert summary["lenses"] == [12, 14]
+
+
+def test_recipes_by_name_and_path(tmp_path):
+    assert load_recipe("preview")["method"] == "malvar"
+    assert load_recipe("lowlight")["strength"] == 2.0 and "views" in load_recipe("lowlight")["outputs"]
+    assert load_recipe("default")["outputs"] == ["center", "mean", "lightfield"]
+    path = tmp_path / "mine.toml"
+    path.write_text('method = "admm-st"\noutputs = "center,refocus"\nrefocus = "-0.5,0.5"\niterations = 3\n')
+    recipe = load_recipe(path)
+    assert recipe["method"] == "admm-st" and recipe["outputs"] == ["center", "refocus"]
+    assert recipe["iterations"] == 3 and recipe["name"] == "mine"
+    assert recipe["strength"] == DEFAULTS["strength"] and recipe["lambda"] is None  # defaults filled in
+    assert load_recipe(str(path)) == recipe
+
+
+@pytest.mark.parametrize("text, word", [
+    ('methd = "malvar"', "methd"),
+    ('method = "bilinear"', "method"),
+    ("strength = 0", "strength"),
+    ('strength = "2"', "strength"),
+    ("iterations = 1.5", "iterations"),
+    ("iterations = 0", "iterations"),
+    ("lambda = -1", "lambda"),
+    ('outputs = ["center", "thumbnail"]', "thumbnail"),
+    ('format = "jpeg"', "format"),
+    ('previews = "yes"', "previews"),
+    ('refocus = "x:y"', "refocus"),
+    ("method = ", "TOML"),
+])
+def test_bad_recipes_are_rejected(tmp_path, text, word):
+    path = tmp_path / "bad.toml"
+    path.write_text(text + "\n")
+    with pytest.raises(ValueError, match=word):
+        load_recipe(path)
+
+
+def test_unknown_recipe_name_and_missing_file():
+    with pytest.raises(ValueError, match="unknown recipe 'nope'.*default"):
+        load_recipe("nope")
+    with pytest.raises(ValueError, match="does not exist"):
+        load_recipe("no/such/recipe.toml")
+    with pytest.raises(ValueError, match="unknown option 'speed'"):
+        pipeline_from_recipe("default", speed=3)
+    with pytest.raises(ValueError, match="strength"):
+        pipeline_from_recipe("default", strength=-1)
+
+
+def test_stage_contracts(capture, tmp_path):
+    with pytest.raises(ValueError, match="Decode takes a path"):
+        Decode()(42)
+    with pytest.raises(ValueError, match="does not exist"):
+        Decode()(tmp_path / "missing.dng")
+    with pytest.raises(ValueError, match="Grid takes a Mosaic"):
+        Grid()(np.zeros((18, 18)))
+    with pytest.raises(ValueError, match="pitch and white"):
+        Grid(pitch=9, white=capture)
+    with pytest.raises(ValueError, match="pitch must be an integer"):
+        Grid(pitch=1)
+    with pytest.raises(ValueError, match="calibration"):
+        Grid(calibration=tmp_path / "none.json")
+    with pytest.raises(ValueError, match="Demosaic takes a Gridded"):
+        Demosaic()("raw.dng")
+    with pytest.raises(ValueError, match="unknown method"):
+        Demosaic("bilinear")
+    with pytest.raises(ValueError, match="strength"):
+        Demosaic(strength=0)
+    with pytest.raises(ValueError, match="iterations"):
+        Demosaic(iterations=0)
+    with pytest.raises(ValueError, match="Outputs: unknown outputs"):
+        Outputs(outputs=("center", "thumbnail"))
+    with pytest.raises(ValueError, match="Outputs: unknown --format"):
+        Outputs(fmt="jpeg")
+    with pytest.raises(ValueError, match="Outputs takes a Demosaiced"):
+        Outputs()(np.zeros((2, 2, 3, 3, 3)), tmp_path)
+    with pytest.raises(ValueError, match="in that order"):
+        Pipeline([Grid(), Decode(), Demosaic()])
+
+    # the stages one by one: what each returns
+    mosaic = Decode()(capture)
+    gridded = Grid(pitch=9)(mosaic)
+    assert isinstance(gridded, Gridded) and gridded.pitch == 9 and gridded.origin == (0, 0)
+    assert gridded.data.shape == (12 * 9, 14 * 9) and gridded.lens_response is None
+    assert gridded.metadata["geometry"]["from"] == "--pitch"
+    demosaiced = Demosaic("malvar")(gridded)
+    assert isinstance(demosaiced, Demosaiced) and demosaiced.lightfield.shape == (12, 14, 9, 9, 3)
+    with pytest.raises(ValueError, match="output folder"):
+        Outputs()(demosaiced, None)
+    written = Outputs(outputs=["lightfield"], previews=False)(demosaiced, tmp_path / "one")
+    assert [p.name for p in written.paths] == ["lightfield.npy"]
+    np.testing.assert_array_equal(np.load(tmp_path / "one" / "lightfield.npy"), demosaiced.lightfield)
+
+
+def test_process_pipeline_preview_and_explicit_options_win(capture, tmp_path):
+    out = tmp_path / "p"
+    result = CliRunner().invoke(cli, ["process", str(capture), "--pipeline", "preview", "-o", str(out), "--json"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.output)
+    assert summary["method"] == "malvar" and summary["recipe"]["name"] == "preview"
+    assert sorted(p.name for p in out.iterdir()) == ["center.exr", "center.png", "summary.json"]
+
+    out2 = tmp_path / "q"
+    result = CliRunner().invoke(cli, ["process", str(capture), "--pipeline", "preview", "--method", "admm-uv",
+                                      "--iterations", "2", "-o", str(out2), "--json"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.output)
+    assert summary["method"] == "admm-uv" and summary["iterations"] == 2
+    assert summary["recipe"]["from_command_line"] == ["iterations", "method"]
+    assert sorted(p.name for p in out2.iterdir()) == ["center.exr", "center.png", "summary.json"]  # from the recipe
+
+    result = CliRunner().invoke(cli, ["process", str(capture), "--pipeline", "nope", "-o", str(tmp_path / "r")])
+    assert result.exit_code != 0 and "unknown recipe 'nope'" in result.output
+
+
+def test_process_pipeline_by_path(capture, tmp_path):
+    path = tmp_path / "r.toml"
+    path.write_text('method = "malvar"\noutputs = ["lightfield"]\n')
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["process", str(capture), "--pipeline", str(path), "-o", str(out), "--json"])
+    assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in out.iterdir()) == ["lightfield.npy", "summary.json"]
+
+
+@pytest.mark.parametrize("recipe", ["lowlight", "preview"])
+def test_pipeline_equals_process(recipe, capture, tmp_path):
+    summary = pipeline_from_recipe(recipe, outputs=["lightfield"], iterations=3).run(capture, tmp_path / "stages")
+    result = CliRunner().invoke(cli, ["process", str(capture), "--pipeline", recipe, "--outputs", "lightfield",
+                                      "--iterations", "3", "-o", str(tmp_path / "cli"), "--json"])
+    assert result.exit_code == 0, result.output
+    cli_summary = json.loads(result.output)
+    assert (tmp_path / "stages" / "lightfield.npy").read_bytes() == (tmp_path / "cli" / "lightfield.npy").read_bytes()
+    assert summary["parameters"] == cli_summary["parameters"]
+    assert summary["iterations"] == cli_summary["iterations"]
