@@ -46,12 +46,21 @@ def kernels_command(size, pitch, repeats, numpy_repeats, only, as_json, device):
     click.echo(json.dumps(report, indent=2) if as_json else kernels.format_report(report))
 
 
+def capture_source(func):
+    """CAPTURE_DIR, or the scene simulated in memory (--lenses, --lux, --scene)."""
+    for decorate in reversed([
+        click.argument("capture_dir", required=False, type=click.Path(file_okay=False, path_type=Path)),
+        click.option("--lenses", default="64x64", show_default=True, metavar="SxT",
+                     help="Lens array of the in-memory simulation (ignored with CAPTURE_DIR)."),
+        click.option("--lux", type=float, default=12.0, show_default=True, help="Illuminance of the in-memory simulation."),
+        click.option("--scene", default="charts", show_default=True, help="Scene of the in-memory simulation."),
+    ]):
+        func = decorate(func)
+    return func
+
+
 @command.command("pareto")
-@click.argument("capture_dir", required=False, type=click.Path(file_okay=False, path_type=Path))
-@click.option("--lenses", default="64x64", show_default=True, metavar="SxT",
-              help="Lens array of the in-memory simulation (ignored with CAPTURE_DIR).")
-@click.option("--lux", type=float, default=12.0, show_default=True, help="Illuminance of the in-memory simulation.")
-@click.option("--scene", default="charts", show_default=True, help="Scene of the in-memory simulation.")
+@capture_source
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the in-memory simulation.")
 @click.option("--budgets", default="1,2,5,10,20,40", show_default=True, metavar="K,...",
               help="ADMM iteration budgets.")
@@ -99,11 +108,7 @@ def pareto_command(capture_dir, lenses, lux, scene, seed, budgets, reference_bud
 
 
 @command.command("admm")
-@click.argument("capture_dir", required=False, type=click.Path(file_okay=False, path_type=Path))
-@click.option("--lenses", default="64x64", show_default=True, metavar="SxT",
-              help="Lens array of the in-memory simulation (ignored with CAPTURE_DIR).")
-@click.option("--lux", type=float, default=12.0, show_default=True, help="Illuminance of the in-memory simulation.")
-@click.option("--scene", default="charts", show_default=True, help="Scene of the in-memory simulation.")
+@capture_source
 @click.option("--methods", default="admm-uv,admm-st,admm-uvst", show_default=True, help="ADMM methods.")
 @click.option("--iterations", type=int, default=5, show_default=True, help="ADMM iterations per timed solve.")
 @click.option("--cg-steps", type=int, default=4, show_default=True, help="CG steps per iteration (cg_tol = 0).")
