@@ -29,7 +29,7 @@ from .ops.reduce import Reductions
 from .solvers.admm import AdmmSolver, solver_bytes, solver_largest_buffer
 from .solvers.params import AdmmParams
 
-METHODS = ("malvar", "admm-uv", "admm-st", "admm-uvst")
+from .method_names import METHODS  # noqa: F401 (re-exported)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -18,6 +18,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from ..method_names import METHODS
 from . import device_option, user_errors
 
 DEFAULT_OUTPUTS = "center,mean,lightfield"
@@ -115,7 +116,7 @@ def _progress_bar(method: str, iterations, as_json: bool):
 @click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output folder (created if missing).")
 @click.option("--method", default="admm-uv", show_default=True,
-              type=click.Choice(["malvar", "admm-uv", "admm-st", "admm-uvst"]), help="Demosaic/denoise method.")
+              type=click.Choice(METHODS), help="Demosaic/denoise method.")
 @click.option("--pitch", default=None, type=click.IntRange(min=2), show_default=str(DEFAULT_PITCH),
               help="Pixels per microlens of an aligned square grid starting at the sensor's first pixel "
                    "(not with --calibration / --white).")

@@ -1,0 +1,1 @@
+"""Data shipped with lfcl (fitted coefficients): see the README of each file's fitting script."""

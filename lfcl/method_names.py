@@ -1,0 +1,6 @@
+"""The names of the demosaic/denoise methods, importable without numpy (for `lfcl --help`).
+
+What each does and its defaults: lfcl/methods.py.
+"""
+
+METHODS = ("malvar", "admm-uv", "admm-st", "admm-uvst")
