@@ -75,47 +75,64 @@ def admm_reference(b, pattern, pitch, dims, params: AdmmParams, x0, origin=(0, 0
     U, V = pitch
     w = np.ones((U, V)) if lens_weights is None else np.asarray(lens_weights, dtype=np.float64)
     w = np.tile(w, (b.shape[0] // U, b.shape[1] // V))  # per sensor pixel
+    x0 = np.asarray(x0, dtype=np.float64)
+    diagonal = cfa_adjoint_np(w, pattern, origin) + params.rho * neighbour_count(x0.shape, pitch, dims)
+    return admm_operators(
+        b, x0, params, w,
+        forward=lambda v: cfa_sample_np(v, pattern, origin),
+        adjoint=lambda r: cfa_adjoint_np(r, pattern, origin),
+        prior=lambda v: gradient_np(v, pitch, dims),
+        prior_adjoint=lambda z: gradient_adjoint_np(z, pitch, dims),
+        diagonal=diagonal,
+    )
+
+
+def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint, prior, prior_adjoint, diagonal,
+                   prior_weights=1.0) -> AdmmResult:
+    """Scaled-form ADMM for ``min_x 1/2 ||W^(1/2) (A x - b)||^2 + lam sum(w_K |K x|)`` in float64.
+
+    The generic core of the reference solvers: ``forward``/``adjoint`` are A and A^T,
+    ``prior``/``prior_adjoint`` are K and K^T (D, or D stacked with other linear
+    terms), ``data_weights`` W (broadcast against b), ``prior_weights`` w_K (broadcast
+    against K x; each entry's shrinkage threshold is w_K * lam / rho), ``diagonal``
+    the diagonal of A^T W A + rho K^T K (the Jacobi preconditioner; entries <= 0 are
+    left unpreconditioned as 0). The x-update is warm-started Jacobi-PCG.
+    """
+    b = np.asarray(b, dtype=np.float64)
     x = np.array(x0, dtype=np.float64)
-    rho, kappa = params.rho, params.kappa
-
-    def A(v):
-        return cfa_sample_np(v, pattern, origin)
-
-    def D(v):
-        return gradient_np(v, pitch, dims)
-
-    def Dt(v):
-        return gradient_adjoint_np(v, pitch, dims)
+    rho = params.rho
+    thresholds = params.kappa * np.asarray(prior_weights, dtype=np.float64)
 
     def normal(v):
-        return cfa_adjoint_np(w * A(v), pattern, origin) + rho * gradient_gram_np(v, pitch, dims)
+        return adjoint(data_weights * forward(v)) + rho * prior_adjoint(prior(v))
 
-    diagonal = cfa_adjoint_np(w, pattern, origin) + rho * neighbour_count(x.shape, pitch, dims)
+    diagonal = np.asarray(diagonal, dtype=np.float64)
     inverse_diagonal = np.divide(1.0, diagonal, out=np.zeros_like(diagonal), where=diagonal > 0)
 
-    Atb = cfa_adjoint_np(w * b, pattern, origin)
-    z = D(x)
+    Atb = adjoint(data_weights * b)
+    z = prior(x)
     u = np.zeros_like(z)
     history = []
     while True:
         x_next, steps = conjugate_gradient(
-            normal, Atb + rho * Dt(z - u), x, lambda r: inverse_diagonal * r, params.cg_steps, params.cg_tol
+            normal, Atb + rho * prior_adjoint(z - u), x, lambda r: inverse_diagonal * r, params.cg_steps, params.cg_tol
         )
-        dx = D(x_next)
+        dx = prior(x_next)
         v = dx + u
-        z_next = np.sign(v) * np.maximum(np.abs(v) - kappa, 0.0)
+        z_next = np.sign(v) * np.maximum(np.abs(v) - thresholds, 0.0)
         u = v - z_next
         record = IterationRecord(
             iteration=len(history) + 1,
-            objective=0.5 * float(np.sum(w * (A(x_next) - b) ** 2)) + params.lam * float(np.sum(np.abs(dx))),
+            objective=0.5 * float(np.sum(data_weights * (forward(x_next) - b) ** 2))
+            + params.lam * float(np.sum(np.asarray(prior_weights) * np.abs(dx))),
             primal_residual=float(np.linalg.norm(dx - z_next)),
-            dual_residual=rho * float(np.linalg.norm(Dt(z_next - z))),
+            dual_residual=rho * float(np.linalg.norm(prior_adjoint(z_next - z))),
             rms_change=float(np.sqrt(np.mean((x_next - x) ** 2))),
             cg_steps=steps,
         )
         history.append(record)
         primal_scale = max(float(np.linalg.norm(dx)), float(np.linalg.norm(z_next)))
-        dual_scale = rho * float(np.linalg.norm(Dt(u)))
+        dual_scale = rho * float(np.linalg.norm(prior_adjoint(u)))
         x, z = x_next, z_next
         reason = stop_reason(params, record, primal_scale, dual_scale, z.size, x.size)
         if reason:
