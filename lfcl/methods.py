@@ -23,13 +23,12 @@ import numpy as np
 
 from .device import get_runtime
 from .flatfield import flat_field
+from .method_names import METHODS
 from .noise import NoiseEstimate, estimate_noise
 from .ops.malvar import Malvar
 from .ops.reduce import Reductions
 from .solvers.admm import AdmmSolver, solver_bytes, solver_largest_buffer
 from .solvers.params import AdmmParams
-
-from .method_names import METHODS  # noqa: F401 (re-exported)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,12 +59,45 @@ def parse_method(method: str) -> str:
     return method
 
 
-def admm_params(method: str, sigma: float, *, lam=None, iterations=None, rho=None, strength=1.0) -> AdmmParams:
-    """The parameters ``method`` uses at noise level ``sigma`` (explicit values win)."""
+def change_for_tolerance_db(tolerance_db: float) -> float:
+    """The rms change per iteration, in units of sigma, that moves PSNR by at most ``tolerance_db``.
+
+    If x_k has rms error e against the truth, then ||x_k+1 - t|| lies within e +- c
+    for an rms change c, so PSNR moves by at most -20 log10(1 - c/e) dB; where
+    e >= sigma, c <= (1 - 10^(-T/20)) sigma bounds the move by T dB. On the
+    built-in scenes e >= sigma from about 8 lux (charts) and 2 lux (deadleaves) up;
+    darker, the absolute errors are smaller and the bound is a guide (docs/auto.md).
+    """
+    if not (isinstance(tolerance_db, (int, float)) and math.isfinite(tolerance_db) and tolerance_db > 0):
+        raise ValueError(f"tolerance must be a number of dB > 0, got {tolerance_db!r}")
+    return 1.0 - 10.0 ** (-float(tolerance_db) / 20.0)
+
+
+def tolerance_db_for_change(change_per_sigma: float) -> float:
+    """The inverse of :func:`change_for_tolerance_db` (inf for a change of sigma or more)."""
+    return -20.0 * math.log10(1.0 - change_per_sigma) if change_per_sigma < 1 else math.inf
+
+
+def admm_params(method: str, sigma: float, *, lam=None, iterations=None, rho=None, strength=1.0,
+                tolerance_db=None) -> AdmmParams:
+    """The parameters ``method`` uses at noise level ``sigma`` (explicit values win).
+
+    ``tolerance_db``: stop once an iteration can move PSNR by less than this
+    (:func:`change_for_tolerance_db`) instead of the method's default rule; with
+    ``iterations`` as well, that many iterations at most.
+    """
     d = ADMM_DEFAULTS[parse_method(method)]
     if not (strength > 0):
         raise ValueError(f"strength must be > 0, got {strength!r}")
     sigma = max(float(sigma), 1e-6)
+    if tolerance_db is not None:
+        return AdmmParams(
+            lam=float(lam) if lam is not None else strength * d.lam_per_sigma * sigma,
+            rho=float(rho) if rho is not None else d.rho,
+            max_iter=int(iterations) if iterations is not None else max(d.max_iter, 60),
+            cg_steps=d.cg_steps,
+            change_tol=change_for_tolerance_db(tolerance_db) * sigma,
+        )
     return AdmmParams(
         lam=float(lam) if lam is not None else strength * d.lam_per_sigma * sigma,
         rho=float(rho) if rho is not None else d.rho,
@@ -108,7 +140,8 @@ def lens_row_bands(lens_rows: int, per_row: tuple[int, int], limits: tuple[int, 
 def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
                         lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
                         device=None, callback=None, max_memory: int | None = None,
-                        lens_response=None) -> DemosaicResult:
+                        lens_response=None, region_rows: int | None = None,
+                        tolerance_db: float | None = None) -> DemosaicResult:
     """Demosaic (and denoise) a normalised lenslet mosaic [H, W] into [3, H, W] planes.
 
     H and W must be whole multiples of the pitch (crop first). ``noise`` defaults to
@@ -120,6 +153,12 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     ``lens_response`` [U, V] (the white image's vignetting, lfcl/flatfield.py):
     flat-field the mosaic, and for the ADMM methods weight the data term by the
     response squared, leaving the dark corners out.
+    ``tolerance_db``: stop when an iteration can move PSNR by less than this many dB
+    (:func:`admm_params`); default: the method's own rule.
+    ``region_rows`` (admm-uv only): solve bands of this many lens rows one by one,
+    each stopping on its own rule, so that regions that converge early (flat ones)
+    stop early; exact for the (u, v) prior, which couples no two lenses
+    (measured in docs/auto.md: it did not pay).
     """
     method = parse_method(method)
     mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
@@ -130,6 +169,18 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         raise ValueError(f"mosaic {mosaic.shape[0]}x{mosaic.shape[1]} is not a whole number of {U}x{V} lenses")
     if not np.all(np.isfinite(mosaic)):
         raise ValueError("mosaic holds NaN or Inf values")
+    if method == "auto":  # choose the method and strength from the noise level (lfcl/auto.py), then run it
+        from .auto import choose
+
+        noise = noise if noise is not None else estimate_noise(mosaic, pattern, pitch, origin)
+        choice = choose(noise.sigma)
+        result = demosaic_lightfield(mosaic, pattern, pitch, choice.method, origin=origin, lam=lam,
+                                     iterations=iterations, rho=rho, strength=strength * choice.strength,
+                                     noise=noise, device=device, callback=callback, max_memory=max_memory,
+                                     lens_response=lens_response, region_rows=region_rows,
+                                     tolerance_db=tolerance_db)
+        result.parameters = {**result.parameters, "auto": choice.as_dict()}
+        return result
     raw_mosaic, lens_weights = mosaic, None
     if lens_response is not None:
         mosaic, lens_weights = flat_field(mosaic, lens_response)
@@ -144,31 +195,42 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     if not math.isfinite(Reductions(runtime).abs_sum(x0)):  # on the device: no 3-plane copy to the host
         _check_finite(np.array([np.inf]), "the Malvar start", mosaic)
     defaults = ADMM_DEFAULTS[method]
-    needs_sigma = lam is None or (iterations is None and defaults.change_per_sigma > 0)
+    needs_sigma = lam is None or tolerance_db is not None or (iterations is None and defaults.change_per_sigma > 0)
     if noise is None and needs_sigma:
         noise = estimate_noise(raw_mosaic, pattern, pitch, origin)  # the noise of the raw, as lambda expects
     sigma = noise.sigma if noise is not None else 0.0  # unused when lam and iterations are given
-    params = admm_params(method, sigma, lam=lam, iterations=iterations, rho=rho, strength=strength)
+    params = admm_params(method, sigma, lam=lam, iterations=iterations, rho=rho, strength=strength,
+                         tolerance_db=tolerance_db)
     dims = ADMM_DEFAULTS[method].dims
     H, W = mosaic.shape
+    if region_rows is not None and (dims != "uv" or int(region_rows) < 1):
+        raise ValueError(f"region_rows needs admm-uv and a whole number of lens rows >= 1, got {method} "
+                         f"and {region_rows!r}: the other priors couple neighbouring lenses")
     budget = int(max_memory) if max_memory is not None else int(0.8 * runtime.device.global_mem_size)
     needed = solver_bytes((H, W), dims, exact=dims == "uv")
     largest = solver_largest_buffer((H, W), dims)
-    if needed <= budget and largest <= runtime.device.max_mem_alloc_size:
+    fits = needed <= budget and largest <= runtime.device.max_mem_alloc_size
+    if fits and region_rows is None:
         result = AdmmSolver(runtime, mosaic.shape, pattern, pitch, dims, origin).solve(
             b, x0, params, callback=callback, lens_weights=lens_weights)
         planes, runs = result.x.get(), [result]
     elif dims == "uv":
         per_row = (solver_bytes((U, W), dims, exact=True), solver_largest_buffer((U, W), dims))
         bands = lens_row_bands(H // U, per_row, (budget, runtime.device.max_mem_alloc_size))
+        if region_rows is not None:  # regions no larger than memory allows
+            step = min(int(region_rows), bands[0][1] - bands[0][0])
+            bands = [(s0, min(s0 + step, H // U)) for s0 in range(0, H // U, step)]
         x0_host = x0.get()
         del b, x0
         planes, runs = np.empty_like(x0_host), []
+        solvers: dict = {}  # one solver per band height and Bayer row parity, reused
         for s0, s1 in bands:
             rows = slice(s0 * U, s1 * U)
-            band = AdmmSolver(runtime, (rows.stop - rows.start, W), pattern, pitch, dims, (origin[0] + rows.start, origin[1]))
-            result = band.solve(runtime.to_device(mosaic[rows]), runtime.to_device(x0_host[:, rows]), params,
-                                callback=callback, lens_weights=lens_weights)
+            key = (rows.stop - rows.start, (origin[0] + rows.start) % 2)
+            if key not in solvers:
+                solvers[key] = AdmmSolver(runtime, (key[0], W), pattern, pitch, dims, (origin[0] + rows.start, origin[1]))
+            result = solvers[key].solve(runtime.to_device(mosaic[rows]), runtime.to_device(x0_host[:, rows]), params,
+                                        callback=callback, lens_weights=lens_weights)
             planes[:, rows] = result.x.get()
             runs.append(result)
     else:
@@ -183,8 +245,9 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     history = [dict(dataclasses.asdict(r), band=i) for i, run in enumerate(runs) for r in run.history]
     counts = [run.iterations for run in runs]
     reason = runs[0].stop_reason if len(runs) == 1 else (
-        f"{len(runs)} bands of lens rows, {min(counts)}-{max(counts)} iterations, each stopped by its own "
-        f"rule (last band: {runs[-1].stop_reason})")
+        f"{len(runs)} bands of lens rows, {min(counts)}-{max(counts)} iterations (mean over lens rows "
+        f"{np.average(counts, weights=[r.x.shape[1] for r in runs]):.1f}), each stopped by its own rule "
+        f"(last band: {runs[-1].stop_reason})")
     return DemosaicResult(
         planes, method, dataclasses.asdict(params), max(run.iterations for run in runs), time.perf_counter() - start,
         reason, history, noise,

@@ -34,11 +34,11 @@ import numpy as np
 
 from ..evaluate import Capture, capture_in_memory, load_capture
 from ..layout import LightFieldShape, planes_to_exchange
-from ..methods import ADMM_DEFAULTS, METHODS, admm_params, demosaic_lightfield
+from ..methods import ADMM_DEFAULTS, admm_params, demosaic_lightfield
 from ..metrics import lightfield_scores
 from .timing import format_table, time_calls
 
-ADMM_METHODS = tuple(m for m in METHODS if m != "malvar")
+ADMM_METHODS = tuple(ADMM_DEFAULTS)
 PEER_MALVAR = "colour-demosaicing Malvar2004"
 PEER_ADMM = "numpy reference admm-uv (CG)"
 REFERENCE_MAX_BUDGET = 10  # default: the numpy reference runs the budgets up to this

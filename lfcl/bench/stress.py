@@ -70,7 +70,7 @@ import numpy as np
 from ..methods import ADMM_DEFAULTS, METHODS, admm_params, demosaic_lightfield
 from .timing import format_table
 
-ADMM_METHODS = tuple(m for m in METHODS if m != "malvar")
+ADMM_METHODS = tuple(ADMM_DEFAULTS)
 GRID_LAMBDAS = (1e-6, 1e-4, 1e-2, 1.0, 1e2)
 GRID_RHOS = (1e-4, 1e-2, 1.0, 1e2, 1e3)
 GRID_ITERATIONS = 10

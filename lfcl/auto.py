@@ -1,0 +1,77 @@
+"""``--method auto``: choose the method and the lambda strength from the raw's noise level.
+
+The choice is a table over bands of sigma (rms noise per raw pixel, normalised
+units; from the DNG NoiseProfile or estimated from the raw, lfcl/noise.py),
+shipped as lfcl/data/auto_rule.json. ``python -m lfcl.bench.auto_rule`` fitted it
+on training captures (seeds other than the evaluation seed): in each band it
+holds the cheapest candidate (method and lambda strength) whose worst PSNR loss
+(centre view or mean image) against the best fixed method came within 0.1 dB of
+the smallest such loss. A sigma outside the trained range takes the nearest
+band, and the reason says so.
+
+Example::
+
+    >>> from lfcl.auto import choose
+    >>> choice = choose(0.0046)
+    >>> choice.method in ("malvar", "admm-uv", "admm-uvst", "admm-uv-xc", "linear4d")
+    True
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+from importlib import resources
+
+RULE_FILE = "auto_rule.json"
+
+
+@dataclasses.dataclass(frozen=True)
+class AutoChoice:
+    """What ``auto`` chose for one raw, and why (goes into the outputs' metadata)."""
+
+    method: str
+    strength: float
+    sigma: float
+    reason: str
+
+    def as_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@functools.lru_cache(maxsize=1)
+def load_rule() -> tuple[dict, ...]:
+    """The shipped sigma bands, lowest first."""
+    text = resources.files("lfcl.data").joinpath(RULE_FILE).read_text()
+    bands = json.loads(text)["rule"]
+    if not bands:
+        raise ValueError(f"lfcl/data/{RULE_FILE} holds no rule: refit it with python -m lfcl.bench.auto_rule")
+    return tuple(sorted(bands, key=lambda b: b["sigma_from"]))
+
+
+def parse_candidate(name: str) -> tuple[str, float]:
+    """'admm-uv@2' -> ('admm-uv', 2.0); 'malvar' -> ('malvar', 1.0)."""
+    method, _, strength = name.partition("@")
+    return method, float(strength) if strength else 1.0
+
+
+def choose(sigma: float, rule=None) -> AutoChoice:
+    """The method and strength for noise level ``sigma``."""
+    if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma >= 0):
+        raise ValueError(f"auto needs a finite noise level >= 0, got {sigma!r}")
+    bands = load_rule() if rule is None else rule
+    inside = [b for b in bands if b["sigma_from"] <= sigma < b["sigma_to"]]
+    if inside:
+        band, where = inside[0], "in"
+    else:
+        below = sigma < bands[0]["sigma_from"]
+        band = bands[0] if below else bands[-1]
+        where = "below the trained range; nearest band" if below else "above the trained range; nearest band"
+    method, strength = parse_candidate(band["candidate"])
+    reason = (f"sigma {sigma:.3g} {where} {band['sigma_from']:.3g}-{band['sigma_to']:.3g}: on its "
+              f"{band['captures']} training captures {band['candidate']} was the cheapest candidate within "
+              f"{band['within_db']:g} dB of the smallest worst-case PSNR loss against the best fixed method "
+              f"(its loss: {band['worst_loss_db']:.2f} dB)")
+    return AutoChoice(method, strength, float(sigma), reason)

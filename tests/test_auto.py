@@ -1,0 +1,83 @@
+"""`--method auto`: the rule table, its fit, and the demosaic it runs (lfcl/auto.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lfcl.auto import choose, load_rule, parse_candidate
+from lfcl.bench.auto_rule import band_of, fit_rule
+from lfcl.methods import demosaic_lightfield
+from lfcl.noise import NoiseEstimate
+
+RULE = (
+    {"sigma_from": 0.001, "sigma_to": 0.01, "candidate": "malvar", "worst_loss_db": 0.05, "within_db": 0.1,
+     "captures": 2},
+    {"sigma_from": 0.01, "sigma_to": 0.1, "candidate": "admm-uv@2", "worst_loss_db": 0.0, "within_db": 0.1,
+     "captures": 2},
+)
+
+
+def test_choose_takes_the_band_holding_sigma():
+    assert (choose(0.005, RULE).method, choose(0.005, RULE).strength) == ("malvar", 1.0)
+    assert (choose(0.05, RULE).method, choose(0.05, RULE).strength) == ("admm-uv", 2.0)
+    assert "in 0.001-0.01" in choose(0.005, RULE).reason
+
+
+def test_choose_outside_the_trained_range_takes_the_nearest_band_and_says_so():
+    low, high = choose(1e-5, RULE), choose(0.5, RULE)
+    assert low.method == "malvar" and "below the trained range" in low.reason
+    assert high.method == "admm-uv" and "above the trained range" in high.reason
+
+
+@pytest.mark.parametrize("sigma", [float("nan"), float("inf"), -1.0, "0.1"])
+def test_choose_rejects_a_bad_noise_level(sigma):
+    with pytest.raises(ValueError, match="noise level"):
+        choose(sigma, RULE)
+
+
+def test_parse_candidate():
+    assert parse_candidate("admm-uv@0.5") == ("admm-uv", 0.5)
+    assert parse_candidate("malvar") == ("malvar", 1.0)
+
+
+def _row(sigma, results):
+    return {"sigma": sigma, "results": {n: {"psnr_center": c, "psnr_mean": m, "seconds": t}
+                                        for n, (c, m, t) in results.items()}}
+
+
+def test_fit_rule_takes_the_cheapest_candidate_close_enough_to_the_best():
+    # band of sigma 0.002: malvar loses 0.05 dB at most and is cheapest -> malvar;
+    # band of sigma 0.02: malvar loses 1 dB -> the ADMM candidate.
+    rows = [
+        _row(0.002, {"malvar": (40.0, 45.0, 0.01), "admm-uv@1": (40.05, 45.0, 1.0), "admm-uv@2": (40.0, 44.9, 1.0)}),
+        _row(0.02, {"malvar": (30.0, 35.0, 0.01), "admm-uv@1": (31.0, 36.0, 1.0), "admm-uv@2": (30.5, 36.2, 1.0)}),
+    ]
+    rule = fit_rule(rows, within=0.1)
+    assert [b["candidate"] for b in rule] == ["malvar", "admm-uv@1"]
+    assert rule[0]["worst_loss_db"] == pytest.approx(0.05)
+    # admm-uv@2 is not a fixed method: it beats admm-uv@1 on the mean but loses 0.5 dB on the centre
+    assert rule[1]["losses_db"]["admm-uv@2"] == pytest.approx(0.5)
+    assert band_of(0.002) != band_of(0.02)
+
+
+def test_shipped_rule_is_what_the_fit_gives_on_its_own_training_rows():
+    import json
+    from importlib import resources
+
+    shipped = json.loads(resources.files("lfcl.data").joinpath("auto_rule.json").read_text())
+    refit = fit_rule(shipped["training"], shipped["args"]["within"])
+    assert [b["candidate"] for b in refit] == [b["candidate"] for b in load_rule()]
+    assert all(np.isfinite(b["worst_loss_db"]) for b in load_rule())
+
+
+def test_auto_runs_the_chosen_method_and_records_why(rng):
+    mosaic = (0.3 + 0.02 * rng.standard_normal((36, 36))).astype(np.float32)
+    noise = NoiseEstimate(gain=0.0, floor=0.004**2, sigma=0.004, source="test")
+    auto = demosaic_lightfield(mosaic, "GRBG", (9, 9), "auto", noise=noise)
+    choice = choose(0.004)
+    direct = demosaic_lightfield(mosaic, "GRBG", (9, 9), choice.method, noise=noise, strength=choice.strength)
+    assert auto.method == choice.method
+    assert auto.parameters["auto"]["method"] == choice.method and "sigma 0.004" in auto.parameters["auto"]["reason"]
+    np.testing.assert_array_equal(auto.planes, direct.planes)
+
