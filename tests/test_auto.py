@@ -81,3 +81,39 @@ def test_auto_runs_the_chosen_method_and_records_why(rng):
     assert auto.parameters["auto"]["method"] == choice.method and "sigma 0.004" in auto.parameters["auto"]["reason"]
     np.testing.assert_array_equal(auto.planes, direct.planes)
 
+
+
+def test_one_region_covering_every_lens_row_is_the_whole_image_solve(rng):
+    mosaic = (0.3 + 0.02 * rng.standard_normal((27, 18))).astype(np.float32)
+    noise = NoiseEstimate(gain=0.0, floor=0.004**2, sigma=0.004, source="test")
+    whole = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=noise)
+    one = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=noise, region_rows=3)
+    np.testing.assert_array_equal(whole.planes, one.planes)
+    banded = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=noise, region_rows=1)
+    assert banded.stop_reason.startswith("3 bands of lens rows") and np.all(np.isfinite(banded.planes))
+    assert {h["band"] for h in banded.history} == {0, 1, 2}
+
+
+def test_regions_need_the_uv_prior(rng):
+    mosaic = (0.3 + 0.02 * rng.standard_normal((18, 18))).astype(np.float32)
+    with pytest.raises(ValueError, match="region_rows needs admm-uv"):
+        demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uvst", region_rows=1)
+
+
+@pytest.mark.parametrize("db", [0.05, 0.5, 2.0])
+def test_tolerance_db_round_trips_and_bounds_the_change(db):
+    from lfcl.methods import admm_params, change_for_tolerance_db, tolerance_db_for_change
+
+    assert tolerance_db_for_change(change_for_tolerance_db(db)) == pytest.approx(db)
+    # a change c of an image with rms error e >= sigma moves PSNR by at most db
+    sigma, e = 0.01, 0.01
+    c = change_for_tolerance_db(db) * sigma
+    assert -20 * np.log10((e - c) / e) <= db + 1e-9
+    assert admm_params("admm-uv", sigma, tolerance_db=db).change_tol == pytest.approx(c)
+
+
+def test_tolerance_db_must_be_positive():
+    from lfcl.methods import change_for_tolerance_db
+
+    with pytest.raises(ValueError, match="dB > 0"):
+        change_for_tolerance_db(0.0)
