@@ -2,6 +2,6 @@
 
 __version__ = "0.1.0"
 
-from .ops.malvar import malvar  # noqa: E402
+from .ops.malvar import malvar
 
-__all__ = ["malvar", "__version__"]
+__all__ = ["__version__", "malvar"]

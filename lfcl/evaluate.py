@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from . import plots
-from .layout import DIMS, planes_to_exchange, LightFieldShape
+from .layout import DIMS, LightFieldShape, planes_to_exchange
 from .methods import METHODS, demosaic_lightfield, parse_method
 from .metrics import centre_view, lightfield_colour_scores, lightfield_scores, mean_image
 from .raw import read_mosaic
@@ -174,7 +174,7 @@ def capture_in_memory(meta: dict, lux: float) -> Capture:
 
 def centre_gradient_images(truth: np.ndarray) -> dict:
     """The centre view and |gradient| of the light field along each dim, at the centre view."""
-    S, T, U, V, _ = truth.shape
+    _, _, U, V, _ = truth.shape
     u0, v0 = U // 2, V // 2
     grey = truth.mean(axis=-1)
     images = {"ground truth": np.clip(centre_view(truth).mean(axis=-1) / max(float(grey.max()), 1e-6), 0, 1)}

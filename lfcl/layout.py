@@ -91,7 +91,7 @@ class LightFieldShape:
         return (3, *self.sensor_shape)
 
     @classmethod
-    def from_sensor(cls, sensor_shape: tuple[int, int], pitch: tuple[int, int]) -> "LightFieldShape":
+    def from_sensor(cls, sensor_shape: tuple[int, int], pitch: tuple[int, int]) -> LightFieldShape:
         """The light field an aligned grid of ``pitch`` cuts out of a sensor (whole lenses only)."""
         U, V = pitch
         H, W = sensor_shape
@@ -100,7 +100,7 @@ class LightFieldShape:
         return cls(H // U, W // V, U, V)
 
     @classmethod
-    def from_exchange(cls, lightfield: np.ndarray) -> "LightFieldShape":
+    def from_exchange(cls, lightfield: np.ndarray) -> LightFieldShape:
         if lightfield.ndim != 5 or lightfield.shape[-1] != 3:
             raise ValueError(f"a light field must have shape [S, T, U, V, 3], got {lightfield.shape}")
         return cls(*(int(n) for n in lightfield.shape[:4]))

@@ -15,6 +15,7 @@ model directly and takes precedence (see :func:`from_noise_profile`).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 
 import numpy as np
@@ -97,7 +98,7 @@ def estimate_noise(mosaic: np.ndarray, pattern: str, pitch, origin=(0, 0), bins:
     means, variances = means[keep], variances[keep]
     edges = np.unique(np.quantile(means, np.linspace(0, 1, bins + 1)))
     centres, medians = [], []
-    for lo, hi in zip(edges[:-1], edges[1:]):
+    for lo, hi in itertools.pairwise(edges):
         inside = (means >= lo) & (means <= hi)
         if inside.sum() >= 8:
             centres.append(np.median(means[inside]))

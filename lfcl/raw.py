@@ -525,7 +525,7 @@ def _tiff_tags(path: Path) -> dict:
             if profile is not None and (len(profile) < 2 or len(profile) % 2
                                         or not all(math.isfinite(v) for v in profile)):
                 out.pop("noise_profile")
-    except Exception:  # noqa: BLE001 - metadata is optional; the pixels come from LibRaw
+    except Exception:
         return {k: v for k, v in out.items() if k == "camera"}
     finally:
         logger.setLevel(level)
@@ -554,8 +554,7 @@ def _libraw_cause(error: BaseException, messages: list[str], path: Path) -> str:
     for line in messages:
         line = line.strip()
         prefix = f"{path}: "
-        if line.startswith(prefix):
-            line = line[len(prefix):]
+        line = line.removeprefix(prefix)
         if line and line not in extra:
             extra.append(line)
     if extra:
@@ -579,7 +578,7 @@ def _captured_stderr():
     except (OSError, ValueError, AttributeError):
         yield lines
         return
-    tmp = tempfile.TemporaryFile()
+    tmp = tempfile.TemporaryFile()  # noqa: SIM115 (closed in the finally below, after fd 2 is restored)
     try:
         os.dup2(tmp.fileno(), 2)
         try:

@@ -6,10 +6,10 @@ import itertools
 
 import numpy as np
 import pytest
+from conftest import relative_dot_error
 
 from lfcl.layout import PATTERNS
 from lfcl.ops.cfa import CfaSampling, cfa_adjoint_np, cfa_gram_np, cfa_sample_np
-from conftest import relative_dot_error
 
 ORIGINS = [(0, 0), (0, 1), (1, 0), (1, 1)]
 SHAPES = [(1, 1), (9, 9), (27, 45), (37, 53)]

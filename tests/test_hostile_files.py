@@ -21,14 +21,14 @@ present, real camera raws (see ../shared/realdata/SOURCES.md).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
-import contextlib
 import os
-import tempfile
 import struct
 import subprocess
 import sys
+import tempfile
 import textwrap
 import zlib
 from pathlib import Path
@@ -530,7 +530,7 @@ def _as_unprivileged(check, warm_up):
             os.setgid(65534)
             os.setuid(65534)
             check()
-        except BaseException as exc:  # noqa: BLE001 (report anything to the parent)
+        except BaseException as exc:
             import traceback
 
             message = "".join(traceback.format_exception(exc)).encode() or b"failed"

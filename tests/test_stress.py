@@ -72,7 +72,7 @@ def test_flat_saturated_and_defective_pixels(name, method):
     if c.flat is not None:  # a flat input stays flat (Malvar keeps measured samples, TV of a constant is 0)
         np.testing.assert_allclose(result.planes, c.flat, atol=stress.FLAT_TOLERANCE, rtol=0)
     else:  # 1.0 / 0.0 pixels stay within the range of the input, give or take Malvar's overshoot
-        assert -0.5 <= result.planes.min() and result.planes.max() <= 1.5
+        assert result.planes.min() >= -0.5 and result.planes.max() <= 1.5
 
 
 # --------------------------------------------------------------------------- NaN / Inf / overflowing input

@@ -118,7 +118,7 @@ def run(capture: Capture, budgets, reference_budgets=None, methods=ADMM_METHODS,
     from ..solvers.reference import admm_reference
 
     malvar2004 = _colour_demosaicing()
-    budgets = sorted(set(int(b) for b in budgets))
+    budgets = sorted({int(b) for b in budgets})
     if not budgets or budgets[0] < 1:
         raise ValueError(f"budgets must be positive integers, got {budgets}")
     if reference_budgets is None:
@@ -209,9 +209,9 @@ def format_report(report: dict) -> str:
 
 def plot(report: dict, path) -> Path:
     """PSNR against seconds (log x): centre view and mean image side by side, one line per method."""
-    from .. import plots  # noqa: F401  (selects the Agg backend)
     import matplotlib.pyplot as plt
 
+    from .. import plots  # noqa: F401  (selects the Agg backend)
     from ..imageio import atomic_path
 
     methods = list(dict.fromkeys(p["method"] for p in report["points"]))

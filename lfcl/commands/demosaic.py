@@ -50,7 +50,8 @@ def command(input_path: Path, pattern: str | None, method: str, output_path: Pat
     mosaic = read_mosaic(input_path, pattern)
 
     if method == "malvar":
-        from ..ops.malvar import malvar  # imported here: the operator module is optional at import time
+        # imported here: the operator module is optional at import time
+        from ..ops.malvar import malvar
 
         rgb = malvar(mosaic.data, mosaic.pattern, mosaic.origin, device=device)
     else:  # pragma: no cover - click.Choice keeps this out

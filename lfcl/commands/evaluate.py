@@ -44,7 +44,7 @@ def command(capture_dir, methods, out_dir, sweep_lux, gradients, as_json, device
 
     from .. import evaluate as ev
     from .. import plots
-    from ..imageio import write_json, atomic_path
+    from ..imageio import atomic_path, write_json
 
     method_list = ev.check_methods(methods.split(","))
     lux_list = _floats(sweep_lux, "--sweep-lux") if sweep_lux else None
