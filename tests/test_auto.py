@@ -102,11 +102,7 @@ def test_regions_need_the_uv_prior(rng):
 
 @pytest.mark.parametrize("db", [0.05, 0.5, 2.0])
 def test_tolerance_db_round_trips_and_bounds_the_change(db):
-    from lfcl.methods import (
-        admm_params,
-        change_for_tolerance_db,
-        tolerance_db_for_change,
-    )
+    from lfcl.methods import admm_params, change_for_tolerance_db, tolerance_db_for_change
 
     assert tolerance_db_for_change(change_for_tolerance_db(db)) == pytest.approx(db)
     # a change c of an image with rms error e >= sigma moves PSNR by at most db

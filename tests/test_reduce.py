@@ -7,14 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from lfcl.ops.reduce import (
-    Reductions,
-    abs_sum_np,
-    diff_norm2_np,
-    dot_np,
-    norm2_np,
-    sum_np,
-)
+from lfcl.ops.reduce import Reductions, abs_sum_np, diff_norm2_np, dot_np, norm2_np, sum_np
 
 # Lengths that are multiples of nothing (chunk = 16 floats, any work-group size).
 SIZES = [1, 7, 15, 17, 1000, 12345, 1_000_003]
