@@ -13,7 +13,7 @@ import click
 
 from . import __version__
 
-COMMANDS = ("devices", "demosaic", "simulate", "process", "evaluate", "bench", "calibrate")
+COMMANDS = ("devices", "demosaic", "simulate", "process", "batch", "evaluate", "bench", "calibrate")
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})

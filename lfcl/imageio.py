@@ -120,6 +120,8 @@ def write_image(path, image: np.ndarray, metadata: dict | None = None, *, pixel_
         raise ValueError(f"refusing to write {path.name}: the image holds NaN or Inf values")
     height, width, channels = image.shape
     spec = oiio.ImageSpec(width, height, channels, fmt)
+    # no write date (OpenImageIO stamps EXR capDate / TIFF DateTime otherwise): same inputs, same bytes
+    spec.attribute("DateTime", "")
     if path.suffix.lower() == ".exr":
         spec.attribute("compression", "zip")
     for key, value in (metadata or {}).items():

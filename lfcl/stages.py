@@ -8,16 +8,16 @@ stage               takes                                 returns
 ==================  ====================================  =============================================
 ``Decode``          a path (str / PathLike)               :class:`lfcl.raw.Mosaic`
 ``Grid``            a ``Mosaic``                          :class:`Gridded` (data, pitch, origin,
-                                                          lens_response, metadata; + mosaic, lenses)
+                                                          lens_response, metadata; + mosaic, lenses,
+                                                          seconds)
 ``Demosaic``        a ``Gridded``                         :class:`Demosaiced` (result, lightfield
                                                           ``[S, T, U, V, 3]``, metadata, mosaic)
-``Outputs``         a ``Demosaiced`` and an output folder :class:`Written` (paths, plan, metadata)
+``Outputs``         a ``Demosaiced`` and an output folder :class:`Written` (paths, plan, seconds)
 ==================  ====================================  =============================================
 
-The stages call the same functions as ``lfcl process`` (read_mosaic, aligned_geometry,
-calibrate_white / load_calibration, demosaic_lightfield, plan_outputs / write_outputs), with the
-same arguments, so a :class:`Pipeline` and ``lfcl process`` with the same settings write the same
-``lightfield.npy``.
+These objects are the one implementation: ``lfcl process`` and ``lfcl batch`` build a
+:class:`Pipeline` of them (lfcl/commands/process.py) and run it, so a Pipeline and the
+commands with the same settings write the same files.
 """
 
 from __future__ import annotations
@@ -34,18 +34,41 @@ from .raw import Mosaic
 DEFAULT_PITCH = 9
 DEFAULT_OUTPUTS = ("center", "mean", "lightfield")
 DEFAULT_REFOCUS = "-1:1:0.25"
+#: The grid kinds the Demosaic stage takes (``Gridded.metadata["geometry"]["grid"]``).
+GRID_KINDS = ("aligned-square",)
 
 
 class Gridded(NamedTuple):
-    """The lens grid stage's result: the cropped normalised mosaic and where its lenses are."""
+    """The Grid stage's result: the sensor samples and where the lenses are on them.
 
-    data: np.ndarray  # [H, W] float32: whole lenses only, normalised like Mosaic.data
-    pitch: int  # pixels per lens (square, aligned)
-    origin: tuple  # sensor (row, col) of the first whole lens's top-left pixel
-    lens_response: np.ndarray | None  # [P, P] vignetting from a white image / calibration, or None
-    metadata: dict  # "geometry" (+ "calibration", "flat_field")
-    mosaic: Mosaic  # the decoded raw (pattern, noise profile, colour)
-    lenses: tuple  # S, T
+    * ``data``: ``[H, W]`` float32 sensor samples the Demosaic stage reads, normalised like
+      ``Mosaic.data``. For the ``aligned-square`` grid: the mosaic cropped to whole lenses,
+      ``H = S * pitch``, ``W = T * pitch``.
+    * ``pitch``: samples per lens along u and along v of the light field (int; U = V = pitch).
+    * ``origin``: sensor (row, col) of ``data[0, 0]``; the Bayer phase of ``data`` follows from it.
+    * ``lens_response``: ``[pitch, pitch]`` vignetting from a white image or calibration
+      weights (lfcl/flatfield.py), or None.
+    * ``metadata``: JSON-friendly, recorded in every output file (so nothing run-dependent
+      such as timings): ``geometry`` always, with ``grid`` (the grid kind, one of
+      :data:`GRID_KINDS`), ``pitch`` [U, V], ``lenses`` [S, T], ``first_lens_pixel`` and
+      ``from`` (where the grid came from); ``calibration`` and ``flat_field`` when they apply.
+    * ``mosaic``: the decoded raw (pattern, noise profile, colour metadata).
+    * ``lenses``: (S, T) of the light field.
+    * ``seconds``: parts of this stage worth timing apart (``calibrate`` with a white image).
+
+    A Grid for other lattices (rotated, non-integer pitch, hexagonal) names its kind in
+    ``geometry["grid"]`` and adds what the demosaic needs to sample it; the Demosaic stage
+    refuses a kind it does not know.
+    """
+
+    data: np.ndarray
+    pitch: int
+    origin: tuple
+    lens_response: np.ndarray | None
+    metadata: dict
+    mosaic: Mosaic
+    lenses: tuple
+    seconds: dict = {}  # noqa: RUF012 (a NamedTuple default; never mutated)
 
 
 class Demosaiced(NamedTuple):
@@ -67,7 +90,7 @@ class Written(NamedTuple):
 
 def _need(value, kind, stage: str, what: str):
     if not isinstance(value, kind):
-        raise ValueError(f"{stage} takes {what}, got {type(value).__name__}")  # noqa: TRY004 (the stage contract: ValueError)
+        raise ValueError(f"{stage} takes {what}, got {type(value).__name__}")
 
 
 class Decode:
@@ -85,12 +108,13 @@ class Decode:
 
     def __call__(self, path) -> Mosaic:
         if not isinstance(path, (str, os.PathLike)):
-            raise ValueError(f"Decode takes a path, got {type(path).__name__}")  # noqa: TRY004 (the stage contract: ValueError)
-        if not Path(path).is_file():
-            raise ValueError(f"Decode: raw {str(path)!r} does not exist or is not a file")
+            raise ValueError(f"Decode takes a path, got {type(path).__name__}")
         from .raw import read_mosaic
 
-        return read_mosaic(path, self.pattern)
+        try:
+            return read_mosaic(path, self.pattern)
+        except FileNotFoundError as e:  # read_mosaic's own message names the file
+            raise ValueError(str(e)) from None
 
 
 class Grid:
@@ -117,25 +141,28 @@ class Grid:
 
     def __call__(self, mosaic: Mosaic) -> Gridded:
         _need(mosaic, Mosaic, "Grid", "a Mosaic (from Decode)")
-        from .commands.process import _calibration_metadata, aligned_geometry
         from .layout import LightFieldShape
 
         meta: dict = {}
+        seconds: dict = {}
         lens_response = None
         if self.calibration is not None or self.white is not None:
             from .calib import calibrate_white, load_calibration
+            from .calib.aligned import aligned_geometry, calibration_metadata
 
             if self.calibration is not None:
                 cal = load_calibration(self.calibration, mosaic.shape, mosaic.pattern)
                 how, what, src = "--calibration", f"calibration {self.calibration}", self.calibration
             else:
+                start = time.perf_counter()
                 cal = calibrate_white(self.white, self.pattern)
                 cal.check(mosaic.shape, mosaic.pattern, what=Path(mosaic.source).name or "the raw")
+                seconds["calibrate"] = time.perf_counter() - start
                 how, what, src = "--white", f"white image {self.white}", self.white
             geo = aligned_geometry(cal, what)
-            meta["calibration"] = _calibration_metadata(cal, how, src, geo)
+            meta["calibration"] = calibration_metadata(cal, how, src, geo)
             P, (r0, c0), (S, T) = geo["pitch"], geo["first"], geo["lenses"]
-            if cal.weight is not None:
+            if cal.weight is not None:  # the white image's vignetting: flat-field, weight the data term
                 from .flatfield import lens_response_from_calibration
 
                 lens_response = lens_response_from_calibration(cal, (P, P))
@@ -150,19 +177,23 @@ class Grid:
         H, W = LightFieldShape(S, T, P, P).sensor_shape
         meta["geometry"] = {"grid": "aligned-square", "pitch": [P, P], "lenses": [S, T],
                             "first_lens_pixel": [r0, c0], "from": how}
-        return Gridded(mosaic.data[r0:r0 + H, c0:c0 + W], int(P), (r0, c0), lens_response, meta, mosaic, (S, T))
+        return Gridded(mosaic.data[r0:r0 + H, c0:c0 + W], int(P), (r0, c0), lens_response, meta, mosaic, (S, T),
+                       seconds)
 
 
 class Demosaic:
     """Gridded -> :class:`Demosaiced` with ``lfcl.methods.demosaic_lightfield``.
 
     ``lam``/``iterations`` ``None``: follow the noise level (docs/admm.md); ``strength``
-    multiplies the default lambda. ``device``: an OpenCL device spec or None (default)."""
+    multiplies the default lambda. ``max_memory``: device bytes the solver may use (None:
+    80 % of the device's; a larger admm-uv problem runs in bands of lens rows).
+    ``device``: an OpenCL device spec or None (``LFCL_DEVICE``, else the first device).
+    ``callback(record, x)``: called after every ADMM iteration (progress bars)."""
 
     name = "demosaic"
 
     def __init__(self, method: str = "admm-uv", lam: float | None = None, iterations: int | None = None,
-                 strength: float = 1.0, device=None, callback=None):
+                 strength: float = 1.0, device=None, callback=None, max_memory: int | None = None):
         from .methods import parse_method
 
         try:
@@ -176,14 +207,22 @@ class Demosaic:
             raise ValueError(f"Demosaic: iterations must be an integer >= 1 or None, got {iterations!r}")
         if isinstance(strength, bool) or not isinstance(strength, (int, float)) or not strength > 0:
             raise ValueError(f"Demosaic: strength must be a number > 0, got {strength!r}")
+        if max_memory is not None and (isinstance(max_memory, bool) or not isinstance(max_memory, (int, np.integer))
+                                       or max_memory < 1):
+            raise ValueError(f"Demosaic: max_memory must be a number of bytes >= 1 or None, got {max_memory!r}")
         self.lam, self.iterations, self.strength = lam, iterations, float(strength)
+        self.max_memory = None if max_memory is None else int(max_memory)
         self.device, self.callback = device, callback
 
     def options(self) -> dict:
-        return {"method": self.method, "lambda": self.lam, "iterations": self.iterations, "strength": self.strength}
+        return {"method": self.method, "lambda": self.lam, "iterations": self.iterations, "strength": self.strength,
+                "max_memory": self.max_memory}
 
     def __call__(self, gridded: Gridded) -> Demosaiced:
         _need(gridded, Gridded, "Demosaic", "a Gridded (from Grid)")
+        kind = gridded.metadata.get("geometry", {}).get("grid")
+        if kind not in GRID_KINDS:
+            raise ValueError(f"Demosaic: lens grid {kind!r} is not one it takes ({', '.join(GRID_KINDS)})")
         from . import __version__
         from .layout import LightFieldShape, planes_to_exchange
         from .methods import demosaic_lightfield
@@ -196,7 +235,7 @@ class Demosaic:
         result = demosaic_lightfield(gridded.data, mosaic.pattern, (P, P), self.method, origin=gridded.origin,
                                      lam=self.lam, iterations=self.iterations, strength=self.strength, noise=noise,
                                      device=self.device, callback=self.callback,
-                                     lens_response=gridded.lens_response)
+                                     lens_response=gridded.lens_response, max_memory=self.max_memory)
         S, T = gridded.lenses
         lightfield = planes_to_exchange(result.planes, LightFieldShape(S, T, P, P))
         meta = {
@@ -212,7 +251,8 @@ class Demosaic:
 
 class Outputs:
     """(Demosaiced, out_dir) -> :class:`Written`: ``lfcl.outputs.plan_outputs`` then ``write_outputs``
-    (all files or none). ``refocus``: slopes spec, used when ``refocus`` is among ``outputs``."""
+    (all files or none). ``refocus``: slopes spec, used when ``refocus`` is among ``outputs``.
+    ``metadata``: extra keys every output file records (they win over the Demosaic stage's)."""
 
     name = "outputs"
 
@@ -228,36 +268,89 @@ class Outputs:
         except (ValueError, TypeError) as e:
             raise ValueError(f"Outputs: {e}") from None
         if not isinstance(previews, bool):
-            raise ValueError(f"Outputs: previews must be true or false, got {previews!r}")  # noqa: TRY004 (the stage contract: ValueError)
+            raise ValueError(f"Outputs: previews must be true or false, got {previews!r}")
         self.refocus, self.previews, self.metadata = refocus, previews, dict(metadata or {})
 
     def options(self) -> dict:
         return {"outputs": list(self.outputs), "refocus": self.refocus, "format": self.fmt, "previews": self.previews}
 
-    def __call__(self, demosaiced: Demosaiced, out_dir) -> Written:
-        _need(demosaiced, Demosaiced, "Outputs", "a Demosaiced (from Demosaic)")
-        if not isinstance(out_dir, (str, os.PathLike)):
-            raise ValueError(f"Outputs needs an output folder path, got {type(out_dir).__name__}")  # noqa: TRY004 (the stage contract: ValueError)
-        from .outputs import plan_outputs, write_outputs
+    def file_metadata(self, demosaiced: Demosaiced) -> dict:
+        """What every output file records: the Demosaic stage's metadata and this stage's ``metadata``."""
+        return {**demosaiced.metadata, **self.metadata}
 
+    def plan(self, demosaiced: Demosaiced):
+        """Compute every output asked for, in memory: an ``lfcl.outputs.OutputPlan`` (nothing written).
+
+        ``plan.seconds["previews-setup"]`` includes building the colour pipeline.
+        """
+        _need(demosaiced, Demosaiced, "Outputs", "a Demosaiced (from Demosaic)")
+        from .outputs import plan_outputs
+
+        start = time.perf_counter()
         colour = None
         if self.previews:
             from .colour import ColourPipeline
 
             colour = ColourPipeline.from_mosaic(demosaiced.mosaic)
+        colour_seconds = time.perf_counter() - start
         plan = plan_outputs(demosaiced.lightfield, self.outputs, slopes=self.slopes, fmt=self.fmt,
-                            previews=self.previews, metadata={**demosaiced.metadata, **self.metadata}, colour=colour)
+                            previews=self.previews, metadata=self.file_metadata(demosaiced), colour=colour)
+        if "previews-setup" in plan.seconds:
+            plan.seconds["previews-setup"] += colour_seconds
+        return plan
+
+    def write(self, plan, out_dir, extra=(), seconds: dict | None = None) -> list:
+        """Write ``plan``'s files and then ``extra`` (``lfcl.outputs.PlannedFile``) into ``out_dir``: all or none.
+
+        ``seconds`` (kind -> write seconds) is filled in as the files are written.
+        """
+        if not isinstance(out_dir, (str, os.PathLike)):
+            raise ValueError(f"Outputs needs an output folder path, got {type(out_dir).__name__}")
+        from .outputs import write_outputs
+
+        return write_outputs(out_dir, [*plan.files, *extra], seconds)
+
+    def __call__(self, demosaiced: Demosaiced, out_dir) -> Written:
+        _need(demosaiced, Demosaiced, "Outputs", "a Demosaiced (from Demosaic)")
+        if not isinstance(out_dir, (str, os.PathLike)):
+            raise ValueError(f"Outputs needs an output folder path, got {type(out_dir).__name__}")
+        plan = self.plan(demosaiced)
         seconds: dict = {}
-        paths = write_outputs(out_dir, plan.files, seconds)
+        paths = self.write(plan, out_dir, seconds=seconds)
         return Written(paths, plan, seconds)
+
+
+def _skipped(plan, outputs: list) -> list:
+    """What was not computed and why (``refocus`` is also asked for by ``--refocus``)."""
+    if "refocus" in outputs:
+        return list(plan.skipped)
+    return [s if s["output"] != "refocus" else {"output": "refocus", "reason": "not asked for (--outputs, --refocus)"}
+            for s in plan.skipped]
+
+
+def _output_seconds(plan, compute: float, write: dict, files: int) -> dict:
+    """Per output kind: compute and write seconds and the number of files; ``total`` last."""
+    out = {kind: {"compute": plan.seconds.get(kind, 0.0), "write": write.get(kind, 0.0), "files": n}
+           for kind, n in plan.counts().items()}
+    if "previews-setup" in plan.seconds:
+        out["previews-setup"] = {"compute": plan.seconds["previews-setup"], "write": 0.0, "files": 0}
+    out["total"] = {"compute": compute, "write": sum(v for k, v in write.items() if k != "summary"), "files": files}
+    return out
 
 
 class Pipeline:
     """Decode -> Grid -> Demosaic -> Outputs (in that order; Outputs optional).
 
-    ``run(path, out_dir)`` runs the stages, writes ``summary.json`` beside the outputs and
-    returns the summary: the Demosaic metadata plus ``options`` (every stage's options, and
-    ``recipe`` when built from one), ``seconds`` (per stage), ``outputs``, ``skipped``.
+    ``run(path, out_dir)`` runs the stages and returns the summary (docs/outputs.md,
+    "summary.json"): the metadata every output records (method, parameters, geometry,
+    input, ...), ``lenses``, ``options`` (every stage's options, defaults included),
+    ``seconds`` (per stage: ``decode``, ``grid``, ``demosaic``, ``outputs``, and
+    ``calibrate`` when the grid came from a white image; ``grid`` is then the rest of that
+    stage), and with an Outputs stage ``format``, ``previews``, ``colour``, ``outputs``,
+    ``refocus``, ``skipped``, ``output_seconds``. With an Outputs stage the summary is also
+    written as ``summary.json``, last, with the other files: all of them or none.
+    ``finish(summary) -> summary`` (optional) edits the summary before it is written and
+    returned. After a run, ``pipeline.lightfield`` holds the light field.
     """
 
     ORDER = (Decode, Grid, Demosaic, Outputs)
@@ -276,28 +369,54 @@ class Pipeline:
             out.update(s.options())
         return out
 
-    def run(self, path, out_dir=None) -> dict:
+    def run(self, path, out_dir=None, finish=None) -> dict:
+        decode, grid, demosaic = self.stages[:3]
+        outputs = self.stages[3] if len(self.stages) == 4 else None
+        if outputs is not None and not isinstance(out_dir, (str, os.PathLike)):
+            raise ValueError(f"Outputs needs an output folder path, got {type(out_dir).__name__}")
         seconds: dict = {}
-        value = path
-        for stage in self.stages:
-            start = time.perf_counter()
-            value = stage(value, out_dir) if isinstance(stage, Outputs) else stage(value)
-            seconds[stage.name] = time.perf_counter() - start
-            if isinstance(value, Demosaiced):
-                demosaiced = value
-        options = self.options()
-        summary = {**demosaiced.metadata, "source": str(path), "lenses": list(demosaiced.lightfield.shape[:2]),
-                   "options": options, "seconds": seconds}
-        if self.recipe is not None:
-            summary["recipe"] = {k: self.recipe[k] for k in ("name", "path") if k in self.recipe}
-        if isinstance(value, Written):
-            from .imageio import write_json
 
-            plan = value.plan
-            summary.update({"format": plan.image_format, "previews": plan.previews, "colour": plan.colour,
-                            "outputs": [f.name for f in plan.files], "refocus": plan.refocus,
-                            "skipped": plan.skipped, "output_seconds": {"compute": plan.seconds,
-                                                                        "write": value.seconds}})
-            write_json(Path(out_dir) / "summary.json", summary)
+        def timed(stage, value):
+            start = time.perf_counter()
+            value = stage(value)
+            seconds[stage.name] = time.perf_counter() - start
+            return value
+
+        mosaic = timed(decode, path)
+        gridded = timed(grid, mosaic)
+        if "calibrate" in gridded.seconds:  # report the white image's calibration apart
+            seconds["calibrate"] = gridded.seconds["calibrate"]
+            seconds["grid"] = max(0.0, seconds["grid"] - seconds["calibrate"])
+        demosaiced = timed(demosaic, gridded)
         self.lightfield = demosaiced.lightfield
-        return summary
+        metadata = demosaiced.metadata if outputs is None else outputs.file_metadata(demosaiced)
+        summary = {**metadata, "lenses": list(demosaiced.lightfield.shape[:2]), "options": self.options()}
+        if self.recipe is not None and "recipe" not in summary:
+            summary["recipe"] = {k: self.recipe[k] for k in ("name", "path") if k in self.recipe}
+        summary["seconds"] = seconds
+
+        def done() -> dict:  # a fresh copy each time: ``finish`` may edit it
+            out = {**summary, "seconds": dict(seconds)}
+            return finish(out) if finish is not None else out
+
+        if outputs is None:
+            return done()
+
+        from .outputs import PlannedFile
+
+        start = time.perf_counter()
+        plan = outputs.plan(demosaiced)
+        compute = time.perf_counter() - start
+        summary.update({"format": plan.image_format, "previews": plan.previews, "colour": plan.colour,
+                        "outputs": [f.name for f in plan.files], "refocus": plan.refocus,
+                        "skipped": _skipped(plan, outputs.outputs)})
+        write: dict = {}
+
+        def final() -> dict:  # called when summary.json is written (last), and after
+            seconds["outputs"] = compute + sum(v for k, v in write.items() if k != "summary")
+            summary["output_seconds"] = _output_seconds(plan, compute, write, len(plan.files))
+            return done()
+
+        outputs.write(plan, out_dir, [PlannedFile("summary.json", "summary", "json", final)], write)
+        write.pop("summary", None)
+        return final()

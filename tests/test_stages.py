@@ -181,3 +181,21 @@ def test_pipeline_equals_process(recipe, capture, tmp_path):
     assert (tmp_path / "stages" / "lightfield.npy").read_bytes() == (tmp_path / "cli" / "lightfield.npy").read_bytes()
     assert summary["parameters"] == cli_summary["parameters"]
     assert summary["iterations"] == cli_summary["iterations"]
+
+
+def test_demosaic_refuses_an_unknown_grid_kind_and_finish_edits_the_summary(capture, tmp_path):
+    gridded = Grid(pitch=9)(Decode()(capture))
+    assert gridded.metadata["geometry"]["grid"] == "aligned-square" and gridded.seconds == {}
+    hexagonal = gridded._replace(metadata={**gridded.metadata,
+                                           "geometry": {**gridded.metadata["geometry"], "grid": "hexagonal"}})
+    with pytest.raises(ValueError, match="lens grid 'hexagonal'"):
+        Demosaic("malvar")(hexagonal)
+
+    def finish(summary):
+        summary["note"] = "edited"
+        return summary
+
+    pipeline = Pipeline([Decode(), Grid(pitch=9), Demosaic("malvar"), Outputs(["center"], previews=False)])
+    summary = pipeline.run(capture, tmp_path / "out", finish=finish)
+    assert summary["note"] == "edited" and json.loads((tmp_path / "out" / "summary.json").read_text()) == summary
+    assert summary["outputs"] == ["center.exr"] and summary["options"]["max_memory"] is None

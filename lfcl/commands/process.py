@@ -1,22 +1,22 @@
 """`lfcl process`: a lenslet raw in, a demosaiced 4D light field and images out (docs/outputs.md).
 
-Stages: decode the raw, find the lens grid (``--pitch``, ``--calibration`` or
-``--white``), demosaic/denoise (a progress bar over the ADMM iterations on a
-terminal), compute the outputs that were asked for (only those), write them
-(each atomically; if one fails, the ones already written are removed) and
-``summary.json``, print a one-screen summary (``--json``: the summary as JSON).
+The options (:func:`process_options`, shared with `lfcl batch`) become a
+:class:`ProcessSettings` (:func:`settings_from_options`: the ``--pipeline`` recipe
+fills the options not given, and every option a user can get wrong is checked
+before any work), which builds a :class:`lfcl.stages.Pipeline` (Decode, Grid,
+Demosaic, Outputs) and runs it (:func:`run_capture`): the outputs asked for, each
+file written atomically, ``summary.json`` last, all of them or none. Then a
+one-screen summary (``--json``: the summary as JSON).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
-import math
 import sys
-import time
 from pathlib import Path
 
 import click
-import numpy as np
 
 from ..method_names import METHODS
 from . import device_option, user_errors
@@ -24,326 +24,253 @@ from . import device_option, user_errors
 DEFAULT_OUTPUTS = "center,mean,lightfield"
 DEFAULT_REFOCUS = "-1:1:0.25"
 DEFAULT_PITCH = 9
-#: A calibrated grid is processed as aligned when every lens centre on the sensor is
-#: closer than this to the centre of the same lens on an aligned integer-pitch grid.
-ALIGNED_TOLERANCE_PX = 0.5
 
 #: The output kinds (lfcl.outputs.KINDS, repeated here so that `lfcl --help` does not import numpy).
 OUTPUTS = ("center", "mean", "views", "views-each", "refocus", "lightfield")
 
+#: Options a ``--pipeline`` recipe supplies when not given (parameter name -> recipe key).
+RECIPE_KEYS = {"method": "method", "strength": "strength", "lam": "lambda", "iterations": "iterations",
+               "outputs": "outputs", "refocus_spec": "refocus", "fmt": "format", "previews": "previews"}
 
-def aligned_geometry(cal, what: str = "the calibration") -> dict:
-    """The aligned square grid of integer pitch that ``cal`` describes, or a one-line ``ValueError``.
+_OPTIONS = (
+    click.option("--method", default="admm-uv", show_default=True,
+                 type=click.Choice(METHODS), help="Demosaic/denoise method."),
+    click.option("--pitch", default=None, type=click.IntRange(min=2), show_default=str(DEFAULT_PITCH),
+                 help="Pixels per microlens of an aligned square grid starting at the sensor's first pixel "
+                      "(not with --calibration / --white)."),
+    click.option("--calibration", type=click.Path(path_type=Path, readable=False), default=None,
+                 metavar="CAL.json",
+                 help="Lens grid from `lfcl calibrate`: pitch and first lens from it (aligned square grids only)."),
+    click.option("--white", type=click.Path(path_type=Path, readable=False), default=None, metavar="WHITE",
+                 help="Calibrate from this white image first (as `lfcl calibrate WHITE`), then as --calibration."),
+    click.option("--pattern", default=None, help="Bayer pattern; required for EXR/TIFF/PNG mosaics, read from raws."),
+    click.option("--outputs", default=DEFAULT_OUTPUTS, show_default=True,
+                 help=f"Comma-separated: {', '.join(OUTPUTS)}. Only these are computed."),
+    click.option("--refocus", "refocus_spec", default=None, metavar="START:STOP:STEP|A,B,..",
+                 help=f"Refocus slopes (lenses per view step): a range, stop included when on the grid, or a "
+                      f"comma list. Implies the refocus output; refocus without it uses {DEFAULT_REFOCUS}."),
+    click.option("--format", "fmt", default="exr", show_default=True, type=click.Choice(["exr", "tiff"]),
+                 help="Images: EXR (float, scene-linear) or TIFF (16-bit linear, clipped to [0, 1])."),
+    click.option("--previews/--no-previews", default=True, show_default=True,
+                 help="Also write an 8-bit sRGB PNG of every image (white balance and colour matrix from the raw)."),
+    click.option("--lambda", "lam", default=None, type=float,
+                 help="TV weight; default: follows the noise level estimated from the raw (docs/admm.md)."),
+    click.option("--iterations", default=None, type=click.IntRange(min=1),
+                 help="Run exactly this many ADMM iterations; default: the method's early-stopping rule."),
+    click.option("--strength", default=1.0, show_default=True, type=float, help="Multiplier on the default lambda."),
+    click.option("--max-memory", default=None, type=click.FloatRange(min=0.01), metavar="GIB",
+                 help="Device memory the solver may use, GiB; default 80% of the device's. A larger admm-uv "
+                      "problem runs in bands of lens rows (exact: the (u, v) prior couples no two lenses)."),
+    click.option("--pipeline", "--recipe", "pipeline", default=None, metavar="NAME|PATH",
+                 help="A recipe (default, lowlight, preview, or a .toml file; docs/stages.md) supplying defaults "
+                      "for --method, --strength, --lambda, --iterations, --outputs, --refocus, --format, "
+                      "--previews; options given on the command line win."),
+    device_option,
+)
 
-    Returns ``pitch`` (int), ``first`` (sensor row, col of the first whole lens's
-    top-left pixel), ``lenses`` (S, T of whole lenses from there) and
-    ``max_deviation_px`` (largest distance of a calibrated lens centre from the
-    aligned grid's).
+
+def process_options(func):
+    """The options of `lfcl process` (all but RAW, -o and --json) as one click decorator.
+
+    `lfcl batch` takes them too, with the same meaning and defaults; the command receives
+    them as keyword arguments and hands them to :func:`settings_from_options`.
     """
-    import numpy as np
-
-    g = cal.grid
-    H, W = cal.sensor_shape
-    desc = (f"pitch {g.pitch:.4f} px, rotation {g.rotation_deg:+.4f} deg, "
-            f"offset {g.offset[0]:.3f},{g.offset[1]:.3f} px")
-    tail = "is not implemented yet: lfcl process takes aligned square grids of integer pitch and zero rotation"
-    if g.packing != "square":
-        raise ValueError(f"processing a hexagonal lens grid ({what}: {desc}) {tail}")
-    P = round(g.pitch)
-    i, j, rows, cols = cal.centres()
-    if P < 2 or rows.size == 0:
-        raise ValueError(f"{what} has no usable lenses on its {H}x{W} sensor ({desc})")
-    half = (P - 1) / 2
-    R0 = round(float(np.median(rows - i * P)) - half)
-    C0 = round(float(np.median(cols - j * P)) - half)
-    deviation = float(np.max(np.hypot(rows - (R0 + half + i * P), cols - (C0 + half + j * P))))
-    if not deviation < ALIGNED_TOLERANCE_PX:
-        span = max(H, W)
-        kinds = []
-        if abs(math.radians(g.rotation_deg)) * span > 0.1:
-            kinds.append("rotated")
-        if abs(g.pitch - P) * span / g.pitch > 0.1:
-            kinds.append("non-integer-pitch")
-        if not kinds:
-            kinds.append("sub-pixel-offset" if abs(g.offset[0] - round(g.offset[0])) > 0.1
-                         or abs(g.offset[1] - round(g.offset[1])) > 0.1 else "non-aligned")
-        raise ValueError(
-            f"processing a {', '.join(kinds)} square lens grid ({what}: {desc}; lens centres up to "
-            f"{deviation:.2f} px off the nearest aligned grid of pitch {P}, less than {ALIGNED_TOLERANCE_PX:g} px "
-            f"is processed as aligned) {tail}")
-    r0, c0 = R0 % P, C0 % P
-    S, T = (H - r0) // P, (W - c0) // P
-    if S < 1 or T < 1:
-        raise ValueError(f"{what}: no whole {P}x{P} lens fits on the {H}x{W} sensor from pixel ({r0}, {c0})")
-    return {"pitch": P, "first": (r0, c0), "lenses": (S, T), "max_deviation_px": deviation}
+    for option in reversed(_OPTIONS):
+        func = option(func)
+    return func
 
 
-def _calibration_metadata(cal, how: str, path, geo: dict) -> dict:
-    g = cal.grid
-    return {
-        "how": how, "file": None if path is None else str(path), "source": cal.source,
-        "packing": g.packing, "pitch_px": g.pitch, "rotation_deg": g.rotation_deg, "offset_px": list(g.offset),
-        "sensor_shape": list(cal.sensor_shape), "aligned_max_deviation_px": geo["max_deviation_px"],
-    }
+@dataclasses.dataclass(frozen=True)
+class ProcessSettings:
+    """Everything `lfcl process` does to a raw, resolved and checked (plain values: picklable, JSON-able).
+
+    ``outputs``: the output kinds (``refocus`` added when ``--refocus`` was given);
+    ``refocus``: the slopes spec (None when refocus is not among the outputs);
+    ``max_memory``: bytes or None; ``recipe``: what the outputs record about a
+    ``--pipeline`` recipe (name, path, options, from_command_line) or None.
+    """
+
+    method: str = "admm-uv"
+    pitch: int | None = None
+    calibration: str | None = None
+    white: str | None = None
+    pattern: str | None = None
+    outputs: tuple = ("center", "mean", "lightfield")
+    refocus: str | None = None
+    fmt: str = "exr"
+    previews: bool = True
+    lam: float | None = None
+    iterations: int | None = None
+    strength: float = 1.0
+    max_memory: int | None = None
+    device: str | None = None
+    recipe: dict | None = None
+
+    def pipeline(self, callback=None):
+        """The :class:`lfcl.stages.Pipeline` of these settings; ``callback``: per ADMM iteration (progress)."""
+        from .. import __version__
+        from ..stages import Decode, Demosaic, Grid, Outputs, Pipeline
+
+        extra: dict = {"generator": f"lfcl {__version__} process"}
+        if self.recipe is not None:
+            extra["recipe"] = self.recipe
+        return Pipeline([
+            Decode(self.pattern),
+            Grid(pitch=self.pitch, calibration=self.calibration, white=self.white, pattern=self.pattern),
+            Demosaic(self.method, lam=self.lam, iterations=self.iterations, strength=self.strength,
+                     device=self.device, callback=callback, max_memory=self.max_memory),
+            Outputs(list(self.outputs), refocus=self.refocus or DEFAULT_REFOCUS, fmt=self.fmt,
+                    previews=self.previews, metadata=extra),
+        ])
 
 
-def _progress_bar(method: str, iterations, as_json: bool):
-    """A tqdm bar over the ADMM iterations (terminals only; never with --json) and its callback."""
-    if as_json or method == "malvar":
-        return None, None
-    from tqdm import tqdm
+def settings_from_options(options: dict, ctx: click.Context | None = None) -> ProcessSettings:
+    """The :func:`process_options` values of a command -> :class:`ProcessSettings`; one-line errors.
 
-    from ..methods import ADMM_DEFAULTS
-
-    total = iterations if iterations is not None else ADMM_DEFAULTS[method].max_iter
-    bar = tqdm(total=total, desc=method, unit="it", disable=None, leave=False, file=sys.stderr,
-               dynamic_ncols=True)
-    band = [0]
-
-    def callback(record, x):
-        if record.iteration == 1 and bar.n:  # a new band of lens rows
-            band[0] += 1
-            bar.reset()
-            bar.set_description(f"{method} band {band[0] + 1}")
-        bar.update(1)
-        bar.set_postfix_str(f"change {record.rms_change:.2e}", refresh=False)
-
-    return bar, callback
-
-
-@click.command("process")
-@click.argument("raw", type=click.Path(path_type=Path, readable=False))
-@click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="Output folder (created if missing).")
-@click.option("--method", default="admm-uv", show_default=True,
-              type=click.Choice(METHODS), help="Demosaic/denoise method.")
-@click.option("--pitch", default=None, type=click.IntRange(min=2), show_default=str(DEFAULT_PITCH),
-              help="Pixels per microlens of an aligned square grid starting at the sensor's first pixel "
-                   "(not with --calibration / --white).")
-@click.option("--calibration", type=click.Path(path_type=Path, readable=False), default=None, metavar="CAL.json",
-              help="Lens grid from `lfcl calibrate`: pitch and first lens from it (aligned square grids only).")
-@click.option("--white", type=click.Path(path_type=Path, readable=False), default=None, metavar="WHITE",
-              help="Calibrate from this white image first (as `lfcl calibrate WHITE`), then as --calibration.")
-@click.option("--pattern", default=None, help="Bayer pattern; required for EXR/TIFF/PNG mosaics, read from raws.")
-@click.option("--outputs", default=DEFAULT_OUTPUTS, show_default=True,
-              help=f"Comma-separated: {', '.join(OUTPUTS)}. Only these are computed.")
-@click.option("--refocus", "refocus_spec", default=None, metavar="START:STOP:STEP|A,B,..",
-              help=f"Refocus slopes (lenses per view step): a range, stop included when on the grid, or a "
-                   f"comma list. Implies the refocus output; refocus without it uses {DEFAULT_REFOCUS}.")
-@click.option("--format", "fmt", default="exr", show_default=True, type=click.Choice(["exr", "tiff"]),
-              help="Images: EXR (float, scene-linear) or TIFF (16-bit linear, clipped to [0, 1]).")
-@click.option("--previews/--no-previews", default=True, show_default=True,
-              help="Also write an 8-bit sRGB PNG of every image (white balance and colour matrix from the raw).")
-@click.option("--lambda", "lam", default=None, type=float,
-              help="TV weight; default: follows the noise level estimated from the raw (docs/admm.md).")
-@click.option("--iterations", default=None, type=click.IntRange(min=1),
-              help="Run exactly this many ADMM iterations; default: the method's early-stopping rule.")
-@click.option("--strength", default=1.0, show_default=True, type=float, help="Multiplier on the default lambda.")
-@click.option("--max-memory", default=None, type=click.FloatRange(min=0.01), metavar="GIB",
-              help="Device memory the solver may use, GiB; default 80% of the device's. A larger admm-uv "
-                   "problem runs in bands of lens rows (exact: the (u, v) prior couples no two lenses).")
-@click.option("--pipeline", "pipeline", default=None, metavar="NAME|PATH",
-              help="A recipe (default, lowlight, preview, or a .toml file; docs/stages.md) supplying defaults for "
-                   "--method, --strength, --lambda, --iterations, --outputs, --refocus, --format, --previews; "
-                   "options given on the command line win.")
-@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON (no progress bar).")
-@device_option
-@user_errors
-def command(raw, out_dir, method, pitch, calibration, white, pattern, outputs, refocus_spec, fmt, previews, lam,
-            iterations, strength, max_memory, pipeline, as_json, device):
-    """Demosaic a lenslet RAW (DNG, camera raw, or EXR/TIFF/PNG mosaic) into a 4D light field."""
+    With ``pipeline`` (a recipe), the recipe's values replace the options that were not
+    given on the command line (``ctx``'s parameter sources tell which were).
+    """
+    method, strength, lam, iterations = options["method"], options["strength"], options["lam"], options["iterations"]
+    outputs, refocus_spec, fmt, previews = options["outputs"], options["refocus_spec"], options["fmt"], options["previews"]
     recipe_meta = None
-    if pipeline is not None:  # the recipe's values replace the options not given explicitly
+    if options["pipeline"] is not None:
         from click.core import ParameterSource
 
         from ..recipes import load_recipe
 
-        recipe = load_recipe(pipeline)
-        ctx = click.get_current_context()
-        explicit = {p for p in ("method", "strength", "lam", "iterations", "outputs", "refocus_spec", "fmt",
-                                "previews") if ctx.get_parameter_source(p) not in (ParameterSource.DEFAULT,
-                                                                                  ParameterSource.DEFAULT_MAP)}
-        if "method" not in explicit:
-            method = recipe["method"]
-        if "strength" not in explicit:
-            strength = recipe["strength"]
-        if "lam" not in explicit:
-            lam = recipe["lambda"]
-        if "iterations" not in explicit:
-            iterations = recipe["iterations"]
-        if "outputs" not in explicit:
-            outputs = ",".join(recipe["outputs"])
-        if "refocus_spec" not in explicit and "refocus" in recipe["outputs"]:
-            refocus_spec = recipe["refocus"]
-        if "fmt" not in explicit:
-            fmt = recipe["format"]
-        if "previews" not in explicit:
-            previews = recipe["previews"]
+        recipe = load_recipe(options["pipeline"])
+        ctx = ctx or click.get_current_context()
+        explicit = {p for p in RECIPE_KEYS if ctx.get_parameter_source(p) not in (ParameterSource.DEFAULT,
+                                                                                 ParameterSource.DEFAULT_MAP)}
+        values = {"method": method, "strength": strength, "lam": lam, "iterations": iterations, "outputs": outputs,
+                  "refocus_spec": refocus_spec, "fmt": fmt, "previews": previews}
+        for param, key in RECIPE_KEYS.items():
+            if param in explicit:
+                continue
+            if param == "outputs":
+                values[param] = ",".join(recipe["outputs"])
+            elif param == "refocus_spec":
+                if "refocus" in recipe["outputs"]:
+                    values[param] = recipe["refocus"]
+            else:
+                values[param] = recipe[key]
+        method, strength, lam, iterations = values["method"], values["strength"], values["lam"], values["iterations"]
+        outputs, refocus_spec, fmt, previews = (values["outputs"], values["refocus_spec"], values["fmt"],
+                                                values["previews"])
         recipe_meta = {"name": recipe["name"], "path": recipe["path"],
                        "options": {"method": method, "strength": strength, "lambda": lam,
                                    "iterations": iterations, "outputs": outputs, "refocus": refocus_spec,
                                    "format": fmt, "previews": previews},
-                       "from_command_line": sorted({"lam": "lambda", "refocus_spec": "refocus",
-                                                    "fmt": "format"}.get(p, p) for p in explicit)}
-    from .. import __version__
-    from ..layout import LightFieldShape, planes_to_exchange
-    from ..outputs import (
-        PlannedFile,
-        parse_format,
-        parse_outputs,
-        plan_outputs,
-        write_outputs,
-    )
+                       "from_command_line": sorted(RECIPE_KEYS[p] for p in explicit)}
+    from ..outputs import parse_format, parse_outputs
     from ..refocus import parse_slopes
 
     # --- everything a user can get wrong in the options, before any work ------------------
     wanted = parse_outputs(outputs)
     if refocus_spec is not None and "refocus" not in wanted:
         wanted.append("refocus")
-    slopes = parse_slopes(refocus_spec if refocus_spec is not None else DEFAULT_REFOCUS) if "refocus" in wanted else []
+    if "refocus" in wanted:
+        refocus_spec = refocus_spec if refocus_spec is not None else DEFAULT_REFOCUS
+        parse_slopes(refocus_spec)
+    else:
+        refocus_spec = None
     fmt = parse_format(fmt)
+    pitch, calibration, white = options["pitch"], options["calibration"], options["white"]
     given = [name for name, value in (("--pitch", pitch), ("--calibration", calibration), ("--white", white))
              if value is not None]
     if len(given) > 1:
         raise ValueError(f"give the lens grid once: {' and '.join(given)} together")
-    if calibration is not None and not calibration.is_file():
+    if calibration is not None and not Path(calibration).is_file():
         raise FileNotFoundError(f"calibration {str(calibration)!r} does not exist")
-    if white is not None and not white.is_file():
+    if white is not None and not Path(white).is_file():
         raise FileNotFoundError(f"white image {str(white)!r} does not exist")
+    max_memory = options["max_memory"]
+    settings = ProcessSettings(
+        method=method, pitch=pitch, calibration=None if calibration is None else str(calibration),
+        white=None if white is None else str(white), pattern=options["pattern"], outputs=tuple(wanted),
+        refocus=refocus_spec, fmt=fmt, previews=bool(previews), lam=lam, iterations=iterations,
+        strength=float(strength), max_memory=None if max_memory is None else int(max_memory * 2**30),
+        device=options["device"], recipe=recipe_meta)
+    settings.pipeline()  # the stages check the rest (--strength, --lambda, ...), still before any work
+    return settings
 
-    timings: dict = {}
-    skipped: list = []
-    start = time.perf_counter()
-    from ..raw import read_mosaic
 
-    mosaic = read_mosaic(raw, pattern)
-    timings["decode"] = time.perf_counter() - start
-
-    # --- lens grid ---------------------------------------------------------------------------
-    cal_meta, lens_response = None, None
-    if calibration is not None or white is not None:
-        from ..calib import calibrate_white, load_calibration
-
-        start = time.perf_counter()
-        if calibration is not None:
-            cal = load_calibration(calibration, mosaic.shape, mosaic.pattern)
-            how, what = "--calibration", f"calibration {calibration}"
-        else:
-            cal = calibrate_white(white, pattern)
-            cal.check(mosaic.shape, mosaic.pattern, what=f"{Path(raw).name}")
-            how, what = "--white", f"white image {white}"
-            timings["calibrate"] = time.perf_counter() - start
-        geo = aligned_geometry(cal, what)
-        cal_meta = _calibration_metadata(cal, how, calibration if calibration is not None else white, geo)
-        P, (r0, c0), (S, T) = geo["pitch"], geo["first"], geo["lenses"]
-        if cal.weight is not None:  # the white image's vignetting: flat-field, weight the data term
-            from ..flatfield import lens_response_from_calibration
-
-            lens_response = lens_response_from_calibration(cal, (P, P))
+def process_summary(summary: dict) -> dict:
+    """The Pipeline's summary with `lfcl process`'s timing keys (docs/outputs.md): ``decode`` (reading
+    the raw and cutting it to whole lenses), ``calibrate`` (with ``--white``: the whole grid step),
+    ``demosaic``, ``outputs``."""
+    seconds = dict(summary["seconds"])
+    grid = seconds.pop("grid", 0.0)
+    if "calibrate" in seconds:
+        seconds["calibrate"] += grid
     else:
-        P, (r0, c0) = pitch or DEFAULT_PITCH, (0, 0)
-        how = "--pitch" if pitch is not None else "default pitch"
-        full = LightFieldShape.from_sensor(mosaic.shape, (P, P))
-        S, T = full.S, full.T
-    shape = LightFieldShape(S, T, P, P)
-    H, W = shape.sensor_shape
-    data = mosaic.data[r0:r0 + H, c0:c0 + W]
+        seconds["decode"] = seconds.get("decode", 0.0) + grid
+    order = ("decode", "calibrate", "demosaic", "outputs")
+    summary["seconds"] = {k: seconds[k] for k in order if k in seconds}
+    return summary
 
-    # --- demosaic ----------------------------------------------------------------------------
-    from ..methods import demosaic_lightfield
-    from ..noise import from_noise_profile
 
-    noise = None
-    if mosaic.noise_profile is not None and method != "malvar":
-        noise = from_noise_profile(mosaic.noise_profile, data)
-    bar, callback = _progress_bar(method, iterations, as_json)
-    start = time.perf_counter()
+def run_capture(settings: ProcessSettings, raw, out_dir, callback=None) -> dict:
+    """Process one raw into ``out_dir`` (all files or none) and return its summary (= summary.json)."""
+    return settings.pipeline(callback).run(raw, out_dir, finish=process_summary)
+
+
+class IterationBar:
+    """A tqdm bar over the ADMM iterations on stderr (terminals only), made on the first iteration."""
+
+    def __init__(self, method: str, iterations: int | None):
+        self.method, self.iterations, self.bar, self.band = method, iterations, None, 0
+
+    def __call__(self, record, x):
+        if self.bar is None:
+            from tqdm import tqdm
+
+            from ..methods import ADMM_DEFAULTS
+
+            defaults = ADMM_DEFAULTS.get(self.method)
+            total = self.iterations if self.iterations is not None else getattr(defaults, "max_iter", None)
+            self.bar = tqdm(total=total, desc=self.method, unit="it", disable=None, leave=False, file=sys.stderr,
+                            dynamic_ncols=True)
+        elif record.iteration == 1:  # a new band of lens rows
+            self.band += 1
+            self.bar.reset()
+            self.bar.set_description(f"{self.method} band {self.band + 1}")
+        self.bar.update(1)
+        self.bar.set_postfix_str(f"change {record.rms_change:.2e}", refresh=False)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+@click.command("process")
+@click.argument("raw", type=click.Path(path_type=Path, readable=False))
+@click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Output folder (created if missing).")
+@process_options
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON (no progress bar).")
+@user_errors
+def command(raw, out_dir, as_json, **options):
+    """Demosaic a lenslet RAW (DNG, camera raw, or EXR/TIFF/PNG mosaic) into a 4D light field."""
+    settings = settings_from_options(options)
+    bar = None if as_json else IterationBar(settings.method, settings.iterations)
     try:
-        result = demosaic_lightfield(data, mosaic.pattern, (P, P), method, origin=(r0, c0), lam=lam,
-                                     iterations=iterations, strength=strength, noise=noise, device=device,
-                                     callback=callback, lens_response=lens_response,
-                                     max_memory=None if max_memory is None else int(max_memory * 2**30))
+        summary = run_capture(settings, raw, out_dir, callback=bar)
     finally:
         if bar is not None:
             bar.close()
-    timings["demosaic"] = time.perf_counter() - start
-    lightfield = planes_to_exchange(result.planes, shape)
-
-    metadata = {
-        "method": method, "parameters": result.parameters, "source": str(raw), "pattern": mosaic.pattern,
-        "geometry": {"grid": "aligned-square", "pitch": [P, P], "lenses": [S, T], "first_lens_pixel": [r0, c0],
-                     "from": how},
-        "iterations": result.iterations, "stop_reason": result.stop_reason,
-        "noise_sigma": None if result.noise is None else result.noise.sigma,
-        "input": mosaic.metadata(), "generator": f"lfcl {__version__} process",
-    }
-    if recipe_meta is not None:
-        metadata["recipe"] = recipe_meta
-    if cal_meta is not None:
-        metadata["calibration"] = cal_meta
-    if lens_response is not None:
-        metadata["flat_field"] = {
-            "lens_response": np.round(lens_response, 4).tolist(),
-            "left_out_below": 0.2, "data_term_weight": "response^2 (docs: lfcl/flatfield.py)",
-        }
-
-    # --- outputs: compute all, then write all (or none) ---------------------------------------
-    start = time.perf_counter()
-    colour = None
-    if previews:
-        from ..colour import ColourPipeline
-
-        colour = ColourPipeline.from_mosaic(mosaic)
-    colour_seconds = time.perf_counter() - start
-    plan = plan_outputs(lightfield, wanted, slopes=slopes, fmt=fmt, previews=previews, metadata=metadata,
-                        colour=colour)
-    if "previews-setup" in plan.seconds:
-        plan.seconds["previews-setup"] += colour_seconds
-    compute_seconds = time.perf_counter() - start
-    skipped.extend(plan.skipped)
-    if "refocus" not in wanted:
-        skipped = [s if s["output"] != "refocus" else {"output": "refocus",
-                                                      "reason": "not asked for (--outputs, --refocus)"}
-                   for s in skipped]
-    summary = {
-        **metadata, "lenses": [S, T], "format": fmt, "previews": plan.previews, "colour": plan.colour,
-        "seconds": timings, "outputs": [], "refocus": plan.refocus, "skipped": skipped,
-    }
-    out_dir = Path(out_dir)
-    files = list(plan.files)
-    write_seconds: dict = {}
-
-    def final_summary():
-        summary["outputs"] = [f.name for f in files if f.name != "summary.json"]
-        total_write = sum(v for k, v in write_seconds.items() if k != "summary")
-        timings["outputs"] = compute_seconds + total_write
-        summary["output_seconds"] = {
-            kind: {"compute": plan.seconds.get(kind, 0.0), "write": write_seconds.get(kind, 0.0),
-                   "files": n} for kind, n in plan.counts().items()}
-        if "previews-setup" in plan.seconds:
-            summary["output_seconds"]["previews-setup"] = {"compute": plan.seconds["previews-setup"],
-                                                             "write": 0.0, "files": 0}
-        summary["output_seconds"]["total"] = {"compute": compute_seconds, "write": total_write,
-                                              "files": len(files) - 1}
-        return summary
-
-    files.append(PlannedFile("summary.json", "summary", "json", final_summary))
-    write_outputs(out_dir, files, write_seconds)
-    write_seconds.pop("summary", None)
-    final_summary()
-
     if as_json:
         click.echo(json.dumps(summary, indent=2))
     else:
-        _print_summary(raw, out_dir, summary, mosaic)
+        click.echo(summary_text(raw, out_dir, summary))
 
 
-def _print_summary(raw, out_dir, summary: dict, mosaic) -> None:
+def summary_text(raw, out_dir, summary: dict) -> str:
     """The run on one screen: geometry, method, time per stage, what was written and what was skipped."""
     S, T = summary["lenses"]
     P = summary["geometry"]["pitch"][0]
     geo = summary["geometry"]
-    lines = [f"{raw} -> {out_dir}  ({S}x{T} lenses of {P}x{P} px from {geo['from']}, {mosaic.pattern}"
+    lines = [f"{raw} -> {out_dir}  ({S}x{T} lenses of {P}x{P} px from {geo['from']}, {summary['pattern']}"
              + (f", first lens at pixel {geo['first_lens_pixel'][0]},{geo['first_lens_pixel'][1]}"
                 if any(geo["first_lens_pixel"]) else "") + ")"]
     if "calibration" in summary:
@@ -383,4 +310,4 @@ def _print_summary(raw, out_dir, summary: dict, mosaic) -> None:
         for s in summary["skipped"]:
             by_reason.setdefault(s["reason"], []).append(s["output"])
         lines.append("skipped: " + "; ".join(f"{', '.join(names)} ({reason})" for reason, names in by_reason.items()))
-    click.echo("\n".join(lines))
+    return "\n".join(lines)
