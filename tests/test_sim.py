@@ -13,8 +13,15 @@ from click.testing import CliRunner
 
 from lfcl.layout import PATTERNS, channel_map, pattern_from_rawpy, tiled_views
 from lfcl.sim import (
-    LensletGeometry, Plane, SensorModel, load_lightfield, parse_lenses, render_planes, render_scene,
-    simulate, write_capture,
+    LensletGeometry,
+    Plane,
+    SensorModel,
+    load_lightfield,
+    parse_lenses,
+    render_planes,
+    render_scene,
+    simulate,
+    write_capture,
 )
 from lfcl.sim.dng import read_noise_profile
 from lfcl.sim.texture import read_linear, srgb_decode
@@ -374,3 +381,113 @@ def test_parse_lenses():
     for bad in ("", "x", "4x4x4", "0x3", "-1x2"):
         with pytest.raises(ValueError):
             parse_lenses(bad)
+
+
+# --- raws of any lens grid (simulate_grid) -------------------------------------------------
+
+def _linear_in_x(a, b):
+    """A texture whose colour is a + b x (frame x, lenses), the same in R, G, B."""
+    return lambda x, y: np.repeat((a + b * x)[:, None], 3, axis=1).astype(np.float32)
+
+
+@pytest.mark.parametrize("grid", ["square", "hex"])
+def test_grid_truth_follows_the_scene_frame_conventions(grid):
+    # a plane of disparity d whose texture is a + b x: sample (s, t, u, v) sees
+    # a + b (x_c(s, t) + d (v - v0)), x_c = t + 1/2 (+ 1/2 on odd hex rows), whatever the box filter
+    from lfcl.resampling import sampling_model
+    from lfcl.sim.capture import render_grid
+    from lfcl.sim.geometry import GridGeometry
+
+    d, a, b = 0.3, 0.2, 0.05
+    sampling = sampling_model(GridGeometry((80, 90), grid, 9.4, 0.7, (0.3, -0.2)), "GRBG")
+    truth, _ = render_grid([Plane("ramp", d, _linear_in_x(a, b))], sampling)
+    S, T, U, V, _ = truth.shape
+    s, t, v = np.meshgrid(np.arange(S), np.arange(T), np.arange(V), indexing="ij")
+    x_c = t + 0.5 + (0.5 * (s % 2) if grid == "hex" else 0.0)
+    expected = a + b * (x_c + d * (v - (V - 1) / 2))
+    np.testing.assert_allclose(truth[:, :, U // 2, :, 0], expected, atol=1e-5)
+    np.testing.assert_allclose(truth[:, :, 0, :, 1], expected, atol=1e-5)  # no dependence on u
+
+
+def test_grid_pixels_see_their_true_continuous_position():
+    # no inverse crime: each pixel's value comes from its own position under its lens (brute-force
+    # nearest lens centre, offset along the lens row in view steps), not from the regular samples
+    from lfcl.resampling import sampling_model
+    from lfcl.sim.capture import render_grid
+    from lfcl.sim.geometry import GridGeometry
+
+    d, a, b = -0.25, 0.3, 0.04
+    geometry = GridGeometry((70, 80), "hex", 9.4, 0.7, (0.3, -0.2))
+    sampling = sampling_model(geometry, "GRBG")
+    _, radiance = render_grid([Plane("ramp", d, _linear_in_x(a, b))], sampling)
+    grid = geometry.lens_grid()
+    ii, jj = np.meshgrid(np.arange(-2, 12), np.arange(-2, 12), indexing="ij")
+    crow, ccol = grid.centre(ii.ravel(), jj.ravel())
+    rng = np.random.default_rng(0)
+    H, W = geometry.sensor_shape
+    along = np.asarray(grid.col_step) / np.hypot(*grid.col_step)
+    for row, col in zip(rng.integers(10, H - 10, 30), rng.integers(10, W - 10, 30)):
+        k = np.argmin((crow - row) ** 2 + (ccol - col) ** 2)
+        i, j = ii.ravel()[k] - sampling.lens_origin[0], jj.ravel()[k] - sampling.lens_origin[1]
+        dv = ((row - crow[k]) * along[0] + (col - ccol[k]) * along[1]) / (9.4 / sampling.views[1])
+        x = j + 0.5 + 0.5 * (i % 2) + d * dv
+        assert radiance[row * W + col, 0] == pytest.approx(a + b * x, abs=1e-5)
+
+
+def test_simulate_grid_capture():
+    from lfcl.sim.capture import simulate_grid
+
+    cap = simulate_grid("deadleaves", "hex", 9.4, 0.7, (0.3, -0.2), lenses=(20, 18), lux=12, seed=2)
+    S, T = cap.sampling.lenses
+    assert cap.truth.shape == (S, T, 9, 9, 3) and cap.truth.dtype == np.float32
+    assert cap.raw.shape == cap.white.shape == cap.geometry.sensor_shape == (round(20 * 9.4 * np.sqrt(3) / 2), 169)
+    meta = cap.meta
+    assert meta["mode"] == "grid" and meta["grid"] == "hex" and meta["lenses"] == [S, T] and meta["views"] == [9, 9]
+    assert meta["lightfield"]["lens_origin"] == list(cap.sampling.lens_origin)
+    # the mean illuminance of the truth is the requested lux
+    mean_y = float(luminance(cap.truth).mean()) / SensorModel().lux_to_normalised(1.0)
+    assert mean_y == pytest.approx(12.0, rel=0.01)
+    # the white: 80 % of full well at the micro-image centres, dark between them
+    white = (cap.white.astype(np.float64) - 64) / 4031
+    _, _, rows, cols = cap.geometry.centres()
+    at_centres = white[np.rint(rows).astype(int), np.rint(cols).astype(int)]
+    assert np.median(at_centres) == pytest.approx(0.8, abs=0.02)
+    assert np.median(white[cap.sampling.response < 0.01]) < 0.01
+    again = simulate_grid("deadleaves", "hex", 9.4, 0.7, (0.3, -0.2), lenses=(20, 18), lux=12, seed=2)
+    np.testing.assert_array_equal(again.raw, cap.raw)
+
+
+def test_grid_raw_is_the_rendered_scene_times_the_micro_image():
+    # a nearly noiseless sensor: the raw must equal CFA(radiance at each pixel) x response
+    from lfcl.layout import channel_map
+    from lfcl.sim.capture import render_grid, simulate_grid
+    from lfcl.sim.geometry import scene_frame
+    from lfcl.sim.scenes import scene_planes
+
+    sensor = SensorModel(full_well_e=1e8, read_noise_e=0.0, dark_current_e_per_s=0.0, adc_bits=16,
+                         exposure_s=1.0e5 / 90)
+    cap = simulate_grid("charts", "square", 9.4, 0.7, (0.3, -0.2), lenses=(12, 12), lux=2, seed=0,
+                        sensor=sensor, vignetting=True)
+    planes = scene_planes("charts", scene_frame("square", cap.sampling.lenses), 0, cap.sampling.views)
+    _, radiance = render_grid(planes, cap.sampling)
+    H, W = cap.geometry.sensor_shape
+    scale = cap.meta["exposure"]["lux_per_scene_unit"] * sensor.electrons_per_lux / sensor.full_well_e
+    picked = radiance[np.arange(H * W), channel_map((H, W), "GRBG").ravel()].reshape(H, W)
+    expected = picked * scale * cap.geometry.response(vignetting=True)
+    np.testing.assert_allclose(cap.normalised_raw(), expected, atol=1e-3)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--pitch", "9.4"], "--grid"),
+    (["--white-only"], "--grid"),
+    (["--grid", "hex", "--lightfield", "lf.npy"], "--lightfield"),
+    (["--grid", "hex", "--scene", "teapot"], "scene"),
+    (["--grid", "square", "--lux", "0"], "lux"),
+])
+def test_cli_grid_bad_input(tmp_path, cli, args, words):
+    out = tmp_path / "never" / "out"
+    result = CliRunner().invoke(cli, ["simulate", "--lenses", "8x8", *args, "-o", str(out)])
+    assert result.exit_code == 1, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("lfcl: error:") and words in lines[0], result.output
+    assert not (tmp_path / "never").exists()

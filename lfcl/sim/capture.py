@@ -35,7 +35,7 @@ import numpy as np
 
 from .. import __version__
 from ..imageio import write_image, write_json, write_npy
-from ..layout import parse_pattern, tiled_views
+from ..layout import channel_map, parse_pattern, tiled_views
 from .dng import write_dng
 from .geometry import GridGeometry, LensletGeometry
 from .lightfield import load_lightfield
@@ -293,8 +293,8 @@ def _write_folder(directory, files, write) -> Path:
     return directory
 
 
-def write_capture(capture: Capture, directory) -> Path:
-    """Write a capture's files into ``directory`` (created if missing, files replaced)."""
+def write_capture(capture, directory) -> Path:
+    """Write a :class:`Capture` or :class:`GridCapture` into ``directory`` (created if missing, files replaced)."""
 
     def write(tmp: Path):
         s, o = capture.sensor.noise_profile()
@@ -302,9 +302,9 @@ def write_capture(capture: Capture, directory) -> Path:
             write_dng(tmp / name, mosaic, capture.pattern, capture.black_level, capture.white_level,
                       [(s, o)] * 3)
         write_npy(tmp / "truth.npy", capture.truth)
+        S, T, U, V = (int(n) for n in capture.truth.shape[:4])
         write_image(tmp / "truth_views.exr", tiled_views(capture.truth),
-                    {"layout": "U x V grid of S x T views", "lenses": list(capture.geometry.lenses),
-                     "pitch": list(capture.geometry.pitch)})
+                    {"layout": "U x V grid of S x T views", "lenses": [S, T], "pitch": [U, V]})
         write_json(tmp / "meta.json", capture.meta)
 
     return _write_folder(directory, FILES, write)
@@ -383,7 +383,7 @@ def simulate_white(grid: str = "square", pitch: float = 9.0, rotation_deg: float
     meta = {
         "generator": f"lfcl {__version__} simulate",
         "mode": "white-only",
-        "note": "non-aligned lens grid: only the white image is simulated (raws of such grids come later)",
+        "note": "white image only (`lfcl simulate --grid ... --white-only`); simulate_grid makes raws of any grid",
         "seed": seed,
         "pattern": pattern,
         "lenslet": geometry.as_meta(),
@@ -416,3 +416,188 @@ def write_white_capture(capture: WhiteCapture, directory) -> Path:
         write_json(tmp / "meta.json", capture.meta)
 
     return _write_folder(directory, WHITE_FILES, write)
+
+
+# --------------------------------------------------------------------------- raws of any grid
+
+@dataclasses.dataclass
+class GridCapture(_SensorLevels):
+    """A simulated capture through a square or hexagonal grid of any pitch, rotation and offset.
+
+    ``truth`` is on the solver's regular grid (``sampling``, lfcl/resampling.py).
+    """
+
+    raw: np.ndarray  # uint16 [H, W] CFA mosaic
+    white: np.ndarray  # uint16 [H, W] white image of the same camera
+    truth: np.ndarray  # float32 [S, T, U, V, 3], normalised, noise-free, no vignetting
+    meta: dict
+    geometry: GridGeometry
+    sensor: SensorModel
+    pattern: str
+    sampling: object  # lfcl.resampling.SamplingModel of the true geometry
+
+    def normalised_raw(self) -> np.ndarray:
+        """``(raw - black) / (white - black)`` as float32."""
+        return ((self.raw.astype(np.float32) - self.black_level) / (self.white_level - self.black_level))
+
+
+def _grid_geometry(grid, pitch, rotation_deg, offset, lenses, sensor_shape, fill, edge_px) -> GridGeometry:
+    try:
+        pitch, rotation_deg = float(pitch), float(rotation_deg)
+    except (TypeError, ValueError):
+        raise ValueError("pitch and rotation must be numbers") from None
+    kwargs = {"rotation_deg": rotation_deg, "offset": parse_offset(offset), "fill": fill, "edge_px": edge_px}
+    if sensor_shape is not None:
+        geometry = GridGeometry(tuple(sensor_shape), grid, pitch, **kwargs)
+    else:
+        lenses = parse_lenses(lenses) if lenses is not None else (64, 64)
+        geometry = GridGeometry.from_lenses(lenses, grid, pitch, **kwargs)
+    if geometry.sensor_shape[0] * geometry.sensor_shape[1] > 2**28:
+        raise ValueError(f"a {geometry.sensor_shape[0]}x{geometry.sensor_shape[1]} sensor is too large to simulate")
+    return geometry
+
+
+def render_grid(planes, sampling, supersample: int = 3):
+    """The scene through a lens grid: ``(truth [S, T, U, V, 3], radiance [H*W, 3])``, relative units.
+
+    ``truth``: the planes at the regular samples of ``sampling`` (an
+    :class:`lfcl.resampling.SamplingModel`); ``radiance``: every sensor pixel's
+    colour at its own continuous light-field position (nearest lens, offset from
+    its centre in view steps, :meth:`~lfcl.resampling.SamplingModel.pixel_coordinates`),
+    all three colours. Lens (s, t) sits at :func:`lfcl.sim.geometry.scene_position`
+    and integrates over a box of its pitch (rows of a hex grid: sqrt(3)/2 of it).
+    """
+    from .geometry import scene_position
+    from .planes import render_points
+
+    packing = sampling.grid.packing
+    S, T = sampling.lenses
+    U, V = sampling.views
+    footprint = (np.sqrt(3.0) / 2, 1.0) if packing == "hex" else (1.0, 1.0)
+    ss, tt, uu, vv = np.meshgrid(np.arange(S), np.arange(T), np.arange(U), np.arange(V), indexing="ij")
+    y, x = scene_position(packing, ss, tt)
+    truth = render_points(planes, y, x, uu - (U - 1) / 2, vv - (V - 1) / 2, supersample, footprint)
+    H, W = sampling.sensor_shape
+    rows, cols = np.meshgrid(np.arange(H, dtype=np.float64), np.arange(W, dtype=np.float64), indexing="ij")
+    s, t, u, v = sampling.pixel_coordinates(rows.ravel(), cols.ravel())
+    y, x = scene_position(packing, s, t)
+    radiance = render_points(planes, y, x, u - (U - 1) / 2, v - (V - 1) / 2, supersample, footprint)
+    return truth.reshape(S, T, U, V, 3), radiance
+
+
+def simulate_grid(scene: str = "charts", grid: str = "square", pitch: float = 9.0, rotation_deg: float = 0.0,
+                  offset=(0.0, 0.0), *, lenses=None, sensor_shape=None, pattern: str = "GRBG", lux: float = 12.0,
+                  seed: int = 0, exposure=None, vignetting: bool = False, f_number: float = 2.8, views=None,
+                  texture=None, planes: list[Plane] | None = None, sensor: SensorModel | None = None,
+                  supersample: int = 3, fill: float = 0.9, edge_px: float = 0.45) -> GridCapture:
+    """Simulate a raw, white image and truth of a square or hexagonal lens grid (docs/geometry.md).
+
+    The sensor is ``sensor_shape`` or just large enough for ``lenses`` (S, T; default
+    64x64), as :func:`simulate_white`. The regular light field is the one the
+    solvers estimate for the *true* grid (:func:`lfcl.resampling.sampling_model`,
+    ``views`` default round(pitch)): the truth holds the scene at its samples. Each
+    sensor pixel sees the scene at its own continuous light-field position (its
+    nearest lens, its offset from that lens's centre in view steps; no bilinear
+    model involved), times the micro-image response (the white image's disc and,
+    with ``vignetting``, the cos^4 falloff), through the sensor's noise model.
+    """
+    from ..resampling import sampling_model
+    from .geometry import scene_frame
+
+    lux = _check_lux(lux)
+    pattern = parse_pattern(pattern)
+    seed = int(seed)
+    if seed < 0:
+        raise ValueError(f"seed must be >= 0, got {seed}")
+    sensor = sensor if sensor is not None else SensorModel()
+    if exposure is not None:
+        sensor = dataclasses.replace(sensor, exposure_s=parse_exposure(exposure))
+    geometry = _grid_geometry(grid, pitch, rotation_deg, offset, lenses, sensor_shape, fill, edge_px)
+    response = geometry.response(vignetting=vignetting, f_number=f_number)
+    sampling = sampling_model(geometry, pattern, views=views, response=geometry.response())
+    S, T = sampling.lenses
+    U, V = sampling.views
+    frame = scene_frame(geometry.grid, (S, T))
+    if planes is None:
+        scene = check_scene(scene)
+        planes = scene_planes(scene, frame, seed, (U, V), texture)
+        source = {"kind": "scene", "name": scene, "texture": None if texture is None else str(texture)}
+    else:
+        source = {"kind": "planes", "name": "custom"}
+    truth, radiance = render_grid(planes, sampling, supersample)
+    H, W = geometry.sensor_shape
+
+    luminance = truth.reshape(-1, 3) @ LUMINANCE.astype(np.float32)
+    mean_y, peak_y = float(luminance.mean(dtype=np.float64)), float(luminance.max())
+    if not np.isfinite(mean_y) or mean_y <= 0:
+        raise ValueError("the scene is black (mean luminance 0): nothing to scale to the requested lux")
+    lux_per_unit = lux / mean_y
+    scale = np.float32(lux_per_unit * sensor.electrons_per_lux / sensor.full_well_e)
+    truth *= scale
+    radiance *= scale
+    channels = channel_map((H, W), pattern).ravel()
+    expected = radiance[np.arange(H * W), channels].astype(np.float64).reshape(H, W) * response
+    truth = np.minimum(truth, np.float32(1.0), out=truth)
+    del radiance
+
+    raw_rng, white_rng = (np.random.default_rng(q) for q in np.random.SeedSequence([seed, 0x6121D]).spawn(2))
+    raw = sensor.expose(expected, raw_rng)
+    white = sensor.expose(WHITE_FRACTION * response, white_rng)
+    del expected
+    s_coef, o_coef = sensor.noise_profile()
+    mean_normalised = float(sensor.lux_to_normalised(lux))
+    light_field = sampling.as_meta()
+    del light_field["grid"]
+    meta = {
+        "generator": f"lfcl {__version__} simulate",
+        "mode": "grid",
+        "scene": source,
+        "planes": [p.as_meta() for p in planes],
+        "lux": lux,
+        "seed": seed,
+        "pattern": pattern,
+        "lenslet": geometry.as_meta(),
+        "grid": geometry.grid,
+        "pitch": geometry.pitch,
+        "rotation_deg": geometry.rotation_deg,
+        "offset": list(geometry.offset),
+        "sensor_shape": [H, W],
+        "lenses": [S, T],
+        "views": [U, V],
+        "lightfield": {**light_field, "scene_frame": list(frame), "scene_position": (
+            "(s sqrt(3)/2 + 1/2, t + 1/2 + (s mod 2)/2) lenses (hex); (s + 1/2, t + 1/2) (square)")},
+        "sensor": sensor.as_meta(),
+        "black_level": int(sensor.black_level_dn),
+        "white_level": int(sensor.white_level_dn),
+        "electrons_per_lux": sensor.electrons_per_lux,
+        "exposure": {
+            "lux_per_scene_unit": lux_per_unit,
+            "mean_luminance_scene_units": mean_y,
+            "peak_lux": peak_y * lux_per_unit,
+            "mean_electrons": lux * sensor.electrons_per_lux,
+            "mean_normalised": mean_normalised,
+            "luminance_weights": LUMINANCE.tolist(),
+        },
+        "noise": {
+            "profile": [[s_coef, o_coef]] * 3,
+            "variance": "S * x + O in normalised units x = (raw - black) / (white - black)",
+            "sigma": float(sensor.noise_sigma(mean_normalised)),
+            "sigma_at_mean": float(sensor.noise_sigma(mean_normalised)),
+            "sigma_at_1_lux": float(sensor.noise_sigma(sensor.lux_to_normalised(1.0))),
+            "sigma_floor": float(np.sqrt(o_coef)),
+        },
+        "vignetting": {"enabled": bool(vignetting), "model": "cos^4, microlens f-number", "f_number": f_number,
+                       "micro_image": "disc of diameter fill * pitch in raw and white (lenslet.micro_image)"},
+        "white": {"file": "white.dng", "level_normalised": WHITE_FRACTION},
+        "truth": {
+            "file": "truth.npy", "shape": list(truth.shape), "dtype": "float32",
+            "layout": "[S, T, U, V, 3] linear camera RGB on the solvers' regular grid (lightfield)",
+            "scale": "expected electrons / full-well electrons = (raw - black) / (white - black), clipped at 1.0",
+            "noise_free": True, "vignetting": False,
+        },
+        "truth_views": {"file": "truth_views.exr",
+                        "layout": "U x V grid of S x T tiles; tile (u, v) is the view (u, v)"},
+        "supersample": supersample,
+        "files": list(FILES),
+    }
+    return GridCapture(raw, white, truth, meta, geometry, sensor, pattern, sampling)

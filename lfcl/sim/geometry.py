@@ -16,9 +16,10 @@ so ``factor = cos(theta)^4 = (1 + (r / (f_number * pitch))^2)^-2``. At f/2.8 and
 a 9-pixel pitch the centre pixel gets 1.0 and the corner pixels about 0.91.
 
 :class:`GridGeometry` is a square or hexagonal grid of any pitch, rotation and
-offset (lens centres as :class:`lfcl.calib.grid.LensGrid`); only its white image
-is simulated so far (:meth:`GridGeometry.white_expected`, :func:`render_white`;
-docs/calibration.md).
+offset (lens centres as :class:`lfcl.calib.grid.LensGrid`): its white image
+(:meth:`GridGeometry.white_expected`, :func:`render_white`; docs/calibration.md)
+and, with :func:`lfcl.sim.capture.simulate_grid`, raws rendered at every pixel's
+true continuous light-field position (:func:`scene_position`; docs/geometry.md).
 """
 
 from __future__ import annotations
@@ -121,8 +122,8 @@ WHITE_GRIDS = ("square", "hex")
 class GridGeometry:
     """A square or hexagonal microlens grid of any pitch, rotation and offset over a sensor.
 
-    Only white images are simulated for these grids so far (:func:`white_expected`,
-    :func:`render_white`); raws of non-aligned grids come with later work. The
+    White images (:func:`white_expected`, :func:`render_white`) and raws
+    (:func:`lfcl.sim.capture.simulate_grid`) are simulated for these grids. The
     lens centres follow :class:`lfcl.calib.grid.LensGrid` (``centre(i, j)``;
     ``offset`` (0, 0), pitch 9, square, no rotation puts lens (0, 0) at pixel
     (4, 4) as in the aligned camera). Each lens forms a micro-image of the main
@@ -230,6 +231,13 @@ class GridGeometry:
             out[r0:r0 + rows.shape[0]] = level * value
         return out
 
+    def response(self, *, vignetting: bool = False, f_number: float = 2.8) -> np.ndarray:
+        """The micro-image response of every pixel ``[H, W]`` float64, 1 at a disc centre.
+
+        What a raw is multiplied by (the white image's shape, without its level).
+        """
+        return self.white_expected(None, 1.0, vignetting=vignetting, f_number=f_number)
+
     def as_meta(self) -> dict:
         grid = self.lens_grid()
         i, _, _, _ = grid.centres(self.sensor_shape)
@@ -253,3 +261,26 @@ def render_white(geometry: GridGeometry, sensor, rng: np.random.Generator, patte
                  level: float = 0.8, **kwargs) -> np.ndarray:
     """A noisy uint16 white image of a :class:`GridGeometry` through ``sensor`` (a ``SensorModel``)."""
     return sensor.expose(geometry.white_expected(pattern, level, **kwargs), rng)
+
+
+def scene_position(packing: str, s, t):
+    """Scene frame coordinates ``(y, x)`` (lenses, :mod:`lfcl.sim.planes`) of the centre of regular lens (s, t).
+
+    The frame is attached to the lens grid, in units of its pitch: a square grid
+    puts lens (s, t) at ``(s + 1/2, t + 1/2)`` like the aligned camera; a
+    hexagonal grid's lens rows are sqrt(3)/2 apart and its odd rows shifted by half
+    a pitch: ``(s sqrt(3)/2 + 1/2, t + 1/2 + (s mod 2) / 2)`` (the regular block
+    starts at an even lens row, lfcl/resampling.py).
+    """
+    s, t = np.asarray(s), np.asarray(t)
+    if packing == "hex":
+        return s * (np.sqrt(3.0) / 2) + 0.5, t + 0.5 + 0.5 * (s % 2)
+    return s + 0.5, t + 0.5
+
+
+def scene_frame(packing: str, lenses) -> tuple[int, int]:
+    """The scene frame (rows, columns of lenses) that holds an ``S x T`` block of lenses."""
+    S, T = (int(n) for n in lenses)
+    if packing == "hex":
+        return max(1, round(S * np.sqrt(3.0) / 2)), T
+    return S, T

@@ -46,7 +46,7 @@ def hci_views(folder: Path) -> list[Path]:
     if not numbered:
         raise ValueError(f"light-field folder {folder} holds no input_CamNNN.png views")
     n = len(numbered)
-    side = int(round(np.sqrt(n)))
+    side = round(float(np.sqrt(n)))
     if side * side != n or side < 2:
         raise ValueError(f"light-field folder {folder} holds {n} views, not a square number (e.g. 81 = 9x9)")
     if sorted(numbered) != list(range(n)):
@@ -57,7 +57,7 @@ def hci_views(folder: Path) -> list[Path]:
 def load_hci_folder(folder, lenses=None) -> np.ndarray:
     folder = Path(folder)
     views = hci_views(folder)
-    side = int(round(np.sqrt(len(views))))
+    side = round(float(np.sqrt(len(views))))
     out = None
     for k, view_path in enumerate(views):
         view = read_linear(view_path)

@@ -28,7 +28,7 @@ bounded amount of memory (about ``CHUNK_POINTS`` sub-samples per block).
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -96,6 +96,11 @@ def _render_rows(planes, s_rows, T, du, dv, offsets):
                              + offsets[None, None, None, None, None, :], shape).ravel()
     u_off = np.broadcast_to(du[None, None, :, None, None, None], shape).ravel()
     v_off = np.broadcast_to(dv[None, None, None, :, None, None], shape).ravel()
+    return _shade(planes, y_base, x_base, u_off, v_off).reshape(shape + (3,)).mean(axis=(4, 5))
+
+
+def _shade(planes, y_base, x_base, u_off, v_off) -> np.ndarray:
+    """Colour of the frontmost plane at each flat sub-sample (view offsets ``u_off``, ``v_off``): [N, 3]."""
     colour = np.zeros((y_base.size, 3), dtype=np.float32)
     remaining = np.arange(y_base.size)
     for plane in planes:
@@ -111,7 +116,38 @@ def _render_rows(planes, s_rows, T, du, dv, offsets):
         if hit.any():
             colour[remaining[hit]] = plane.texture(x[hit], y[hit])
             remaining = remaining[~hit]
-    return colour.reshape(shape + (3,)).mean(axis=(4, 5))
+    return colour
+
+
+def render_points(planes, y, x, u_off, v_off, supersample: int = 3, footprint=(1.0, 1.0)) -> np.ndarray:
+    """Mean colour of the planes at arbitrary light-field points: ``[N, 3]`` float32.
+
+    Point k is the lens whose centre sits at frame coordinates ``(y[k], x[k])``
+    seen from the continuous view offsets ``(u_off[k], v_off[k])`` (= ``u - u0``,
+    ``v - v0``, view steps): the sub-samples ``y + footprint[0] * dy + d * u_off``,
+    ``x + footprint[1] * dx + d * v_off`` for an ``n x n`` box of ``(dy, dx)``
+    (as :func:`render_planes`, whose lens covers a unit square: footprint (1, 1)).
+    The lattice-free twin of :func:`render_planes` for lens grids of any
+    geometry (lfcl/sim/capture.py :func:`simulate_grid`).
+    """
+    y, x, u_off, v_off = (np.asarray(a, np.float64).ravel() for a in np.broadcast_arrays(y, x, u_off, v_off))
+    if supersample < 1:
+        raise ValueError(f"supersample must be >= 1, got {supersample}")
+    offsets = subsample_offsets(supersample)
+    dy = (float(footprint[0]) * offsets)[:, None]
+    dx = (float(footprint[1]) * offsets)[None, :]
+    n2 = supersample * supersample
+    out = np.empty((y.size, 3), np.float32)
+    per_chunk = max(1, CHUNK_POINTS // n2)
+    for k0 in range(0, y.size, per_chunk):
+        k = slice(k0, min(y.size, k0 + per_chunk))
+        count = k.stop - k.start
+        y_base = np.broadcast_to(y[k, None, None] + dy[None], (count, supersample, supersample)).ravel()
+        x_base = np.broadcast_to(x[k, None, None] + dx[None], (count, supersample, supersample)).ravel()
+        u = np.repeat(u_off[k], n2)
+        v = np.repeat(v_off[k], n2)
+        out[k] = _shade(planes, y_base, x_base, u, v).reshape(count, n2, 3).mean(axis=1)
+    return out
 
 
 def render_planes(planes, lenses, pitch, supersample: int = 3, progress: bool | None = False) -> np.ndarray:
