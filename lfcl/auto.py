@@ -57,18 +57,22 @@ def parse_candidate(name: str) -> tuple[str, float]:
     return method, float(strength) if strength else 1.0
 
 
+def band_for(sigma: float, rule=None) -> tuple[dict, str]:
+    """The band of ``rule`` (default: the shipped one) that holds ``sigma``, or the nearest, and where it lies."""
+    bands = load_rule() if rule is None else tuple(sorted(rule, key=lambda b: b["sigma_from"]))
+    inside = [b for b in bands if b["sigma_from"] <= sigma < b["sigma_to"]]
+    if inside:
+        return inside[0], "in"
+    if sigma < bands[0]["sigma_from"]:
+        return bands[0], "below the trained range; nearest band"
+    return bands[-1], "above the trained range; nearest band"
+
+
 def choose(sigma: float, rule=None) -> AutoChoice:
     """The method and strength for noise level ``sigma``."""
     if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma >= 0):
         raise ValueError(f"auto needs a finite noise level >= 0, got {sigma!r}")
-    bands = load_rule() if rule is None else rule
-    inside = [b for b in bands if b["sigma_from"] <= sigma < b["sigma_to"]]
-    if inside:
-        band, where = inside[0], "in"
-    else:
-        below = sigma < bands[0]["sigma_from"]
-        band = bands[0] if below else bands[-1]
-        where = "below the trained range; nearest band" if below else "above the trained range; nearest band"
+    band, where = band_for(sigma, rule)
     method, strength = parse_candidate(band["candidate"])
     reason = (f"sigma {sigma:.3g} {where} {band['sigma_from']:.3g}-{band['sigma_to']:.3g}: on its "
               f"{band['captures']} training captures {band['candidate']} was the cheapest candidate within "

@@ -9,6 +9,8 @@ grids of integer pitch, sliced exactly) does not take; docs/geometry.md.
 ``admm-st``    regular light field onto the measured sensor pixels, so the solver
 ``admm-uvst``  fits real sensor samples, never interpolated colours
                (lfcl/solvers/resampled.py). Starts from the malvar result.
+``auto``       lfcl.auto.choose at the raw's noise level; a method the rule names that
+               does not run here (e.g. linear4d) becomes :data:`AUTO_FALLBACK`.
 
 Defaults follow lfcl.methods.ADMM_DEFAULTS (lambda per sigma, the stopping rule)
 with the corrections of :data:`GRID_TUNING`, measured on resampled grids
@@ -34,11 +36,16 @@ import time
 import numpy as np
 
 from .layout import parse_pattern, planes_to_exchange
-from .methods import ADMM_DEFAULTS, DemosaicResult, admm_params
+from .methods import ADMM_DEFAULTS, DemosaicResult, admm_params, change_for_tolerance_db
 from .noise import NoiseEstimate
 from .resampling import SamplingModel, sampling_model
 
 GRID_METHODS = ("malvar", "admm-uv", "admm-st", "admm-uvst")
+#: The method names demosaic_resampled takes: the methods and ``auto``.
+GRID_METHOD_NAMES = ("auto", *GRID_METHODS)
+#: What ``auto`` runs when its rule names a method not in GRID_METHODS: the method that gained
+#: over malvar on every resampled setting measured (docs/geometry.md), at its grid defaults.
+AUTO_FALLBACK = "admm-uv"
 
 # CG steps per ADMM iteration (the aligned admm-uv solves its x-update exactly; here
 # A^T W A differs from lens to lens, so CG it is). See docs/geometry.md for the measurement.
@@ -100,8 +107,8 @@ def resample_start(runtime, sampling: SamplingModel, mosaic: np.ndarray):
 def demosaic_resampled(mosaic: np.ndarray, pattern: str | None, geometry, method: str, *, views=None,
                        threshold: float | None = None, lenses=None, lam=None, iterations=None, rho=None,
                        strength: float = 1.0, cg_steps: int | None = None, interpolation_weight: float | None = None,
-                       noise: NoiseEstimate | None = None,
-                       device=None, callback=None, max_memory: int | None = None) -> GridDemosaicResult:
+                       noise: NoiseEstimate | None = None, device=None, callback=None,
+                       max_memory: int | None = None, tolerance_db: float | None = None) -> GridDemosaicResult:
     """Demosaic (and denoise) a normalised lenslet raw ``mosaic`` [H, W] of any lens grid.
 
     ``geometry``: a :class:`lfcl.calib.Calibration` (its grid and white-image
@@ -122,6 +129,16 @@ def demosaic_resampled(mosaic: np.ndarray, pattern: str | None, geometry, method
     :data:`GRID_TUNING`).
     ``callback(record, x)`` after every ADMM iteration. ``max_memory`` bytes
     (default 80 % of the device's): a larger problem is a ``ValueError`` (no bands yet).
+    ``tolerance_db``: stop once an iteration can move PSNR by less than this many dB
+    (lfcl.methods.admm_params, docs/auto.md) instead of the grid's stopping rule (the
+    :data:`GRID_TUNING` change factor then does not apply); ignored by malvar.
+
+    ``method="auto"``: :func:`lfcl.auto.choose` at ``noise.sigma_at`` the mean level of
+    the measured pixels (the sigma lambda uses), then that method with ``strength``
+    times the chosen strength; a method not in :data:`GRID_METHODS` becomes
+    :data:`AUTO_FALLBACK` at strength 1 and the reason says so. The choice goes into
+    ``parameters["auto"]`` (``method``, ``strength``, ``sigma``, ``reason``; plus
+    ``replaced`` = the rule's own ``{"method", "strength"}`` when it fell back).
 
     Returns a :class:`GridDemosaicResult`: ``planes`` [3, S*U, T*V] and
     ``lightfield`` [S, T, U, V, 3] float32, ``sampling`` (its ``as_meta()`` for
@@ -130,9 +147,11 @@ def demosaic_resampled(mosaic: np.ndarray, pattern: str | None, geometry, method
     from .device import get_runtime
     from .ops.reduce import Reductions
 
-    if method not in GRID_METHODS:
+    if method not in GRID_METHOD_NAMES:
         raise ValueError(f"method {method!r} is not available for rotated, non-integer-pitch or hexagonal lens "
-                         f"grids: use one of {', '.join(GRID_METHODS)}")
+                         f"grids: use one of {', '.join(GRID_METHOD_NAMES)}")
+    if tolerance_db is not None:
+        change_for_tolerance_db(tolerance_db)  # a bad tolerance: one line now, before any work
     mosaic = _check_mosaic(mosaic)
     if isinstance(geometry, SamplingModel):
         sampling = geometry
@@ -143,6 +162,10 @@ def demosaic_resampled(mosaic: np.ndarray, pattern: str | None, geometry, method
     if mosaic.shape != sampling.sensor_shape:
         H, W = sampling.sensor_shape
         raise ValueError(f"the lens grid is for a {H}x{W} sensor but the raw is {mosaic.shape[0]}x{mosaic.shape[1]}")
+    if method == "auto":
+        return _auto(mosaic, sampling, noise, lam=lam, iterations=iterations, rho=rho, strength=strength,
+                     cg_steps=cg_steps, interpolation_weight=interpolation_weight, device=device, callback=callback,
+                     max_memory=max_memory, tolerance_db=tolerance_db)
     runtime = get_runtime(device)
     start = time.perf_counter()
     x0 = resample_start(runtime, sampling, mosaic)
@@ -153,19 +176,20 @@ def demosaic_resampled(mosaic: np.ndarray, pattern: str | None, geometry, method
                                   planes_to_exchange(planes, shape), sampling)
     if not math.isfinite(Reductions(runtime).abs_sum(x0)):
         _finite(np.array([np.inf]), "the Malvar start", mosaic)
-    pixels = sampling.measured_pixels()
-    if pixels.size == 0:
-        raise ValueError("no sensor pixel is bright enough in the white image to measure the light field")
-    level = float(np.mean(mosaic.ravel()[pixels], dtype=np.float64))
+    pixels, level = _measured(sampling, mosaic)
     defaults = ADMM_DEFAULTS[method]
-    if noise is None and (lam is None or (iterations is None and defaults.change_per_sigma > 0)):
+    if noise is None and (lam is None or tolerance_db is not None
+                          or (iterations is None and defaults.change_per_sigma > 0)):
         from .grid_noise import estimate_grid_noise
 
         noise = estimate_grid_noise(mosaic, sampling)
     sigma = noise.sigma_at(level) if noise is not None else 0.0
     tuning = GRID_TUNING.get(method, GridTuning())
-    params = admm_params(method, sigma, lam=lam, iterations=iterations, rho=rho, strength=strength * tuning.strength)
-    params = dataclasses.replace(params, change_tol=params.change_tol * tuning.change_factor,
+    params = admm_params(method, sigma, lam=lam, iterations=iterations, rho=rho, strength=strength * tuning.strength,
+                         tolerance_db=tolerance_db)
+    # the grid's later stop (change_factor) tunes the default rule; a tolerance in dB is the user's own
+    change_factor = tuning.change_factor if tolerance_db is None else 1.0
+    params = dataclasses.replace(params, change_tol=params.change_tol * change_factor,
                                  cg_steps=int(cg_steps if cg_steps is not None else GRID_CG_STEPS), x_update="cg")
     if interpolation_weight is None:
         interpolation_weight = tuning.interpolation_weight
@@ -183,6 +207,37 @@ def demosaic_resampled(mosaic: np.ndarray, pattern: str | None, geometry, method
     parameters = {**dataclasses.asdict(params), "sigma": sigma, "interpolation_weight": interpolation_weight}
     return GridDemosaicResult(planes, method, parameters, result.iterations, time.perf_counter() - start,
                               result.stop_reason, history, noise, planes_to_exchange(planes, shape), sampling)
+
+
+def _measured(sampling: SamplingModel, mosaic: np.ndarray):
+    """The data term's pixels and their mean raw level (the level sigma is taken at)."""
+    pixels = sampling.measured_pixels()
+    if pixels.size == 0:
+        raise ValueError("no sensor pixel is bright enough in the white image to measure the light field")
+    return pixels, float(np.mean(mosaic.ravel()[pixels], dtype=np.float64))
+
+
+def _auto(mosaic, sampling: SamplingModel, noise, *, strength, **options) -> GridDemosaicResult:
+    """``method="auto"`` (see :func:`demosaic_resampled`): choose at the solver's sigma, then run the choice."""
+    from .auto import AutoChoice, choose
+
+    if noise is None:
+        from .grid_noise import estimate_grid_noise
+
+        noise = estimate_grid_noise(mosaic, sampling)
+    choice = choose(noise.sigma_at(_measured(sampling, mosaic)[1]))
+    ran = choice
+    if choice.method not in GRID_METHODS:
+        ran = AutoChoice(AUTO_FALLBACK, 1.0, choice.sigma,
+                         f"{choice.reason}; {choice.method} does not run on resampled lens grids, so "
+                         f"{AUTO_FALLBACK} at its grid defaults")
+    result = demosaic_resampled(mosaic, None, sampling, ran.method, strength=strength * ran.strength, noise=noise,
+                                **options)
+    auto = ran.as_dict()
+    if ran is not choice:
+        auto["replaced"] = {"method": choice.method, "strength": choice.strength}
+    result.parameters = {**result.parameters, "auto": auto}
+    return result
 
 
 def _finite(planes: np.ndarray, what: str, mosaic: np.ndarray) -> np.ndarray:

@@ -9,7 +9,7 @@ stage               takes                                 returns
 ``Decode``          a path (str / PathLike)               :class:`lfcl.raw.Mosaic`
 ``Grid``            a ``Mosaic``                          :class:`Gridded` (data, pitch, origin,
                                                           lens_response, metadata; + mosaic, lenses,
-                                                          seconds)
+                                                          seconds, sampling)
 ``Demosaic``        a ``Gridded``                         :class:`Demosaiced` (result, lightfield
                                                           ``[S, T, U, V, 3]``, metadata, mosaic)
 ``Outputs``         a ``Demosaiced`` and an output folder :class:`Written` (paths, plan, seconds)
@@ -22,6 +22,7 @@ commands with the same settings write the same files.
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from pathlib import Path
@@ -29,13 +30,16 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .auto_report import skipped_by_auto
 from .raw import Mosaic
 
 DEFAULT_PITCH = 9
 DEFAULT_OUTPUTS = ("center", "mean", "lightfield")
 DEFAULT_REFOCUS = "-1:1:0.25"
-#: The grid kinds the Demosaic stage takes (``Gridded.metadata["geometry"]["grid"]``).
-GRID_KINDS = ("aligned-square",)
+#: The grid kinds the Demosaic stage takes (``Gridded.metadata["geometry"]["grid"]``): an aligned
+#: square grid of integer pitch, sliced exactly (lfcl.methods), and any other calibrated grid,
+#: demosaiced with the resampling inside the forward operator (lfcl.grid_demosaic, docs/geometry.md).
+GRID_KINDS = ("aligned-square", "resampled")
 
 
 class Gridded(NamedTuple):
@@ -43,22 +47,25 @@ class Gridded(NamedTuple):
 
     * ``data``: ``[H, W]`` float32 sensor samples the Demosaic stage reads, normalised like
       ``Mosaic.data``. For the ``aligned-square`` grid: the mosaic cropped to whole lenses,
-      ``H = S * pitch``, ``W = T * pitch``.
-    * ``pitch``: samples per lens along u and along v of the light field (int; U = V = pitch).
+      ``H = S * pitch``, ``W = T * pitch``; for ``resampled``: the whole sensor.
+    * ``pitch``: samples per lens along u and along v of the light field (int; U = V = pitch;
+      for ``resampled`` the views per lens, ``round(pitch)`` of the calibration).
     * ``origin``: sensor (row, col) of ``data[0, 0]``; the Bayer phase of ``data`` follows from it.
     * ``lens_response``: ``[pitch, pitch]`` vignetting from a white image or calibration
-      weights (lfcl/flatfield.py), or None.
+      weights (lfcl/flatfield.py), or None (always None for ``resampled``: its sampling model
+      holds the per-pixel response).
     * ``metadata``: JSON-friendly, recorded in every output file (so nothing run-dependent
       such as timings): ``geometry`` always, with ``grid`` (the grid kind, one of
-      :data:`GRID_KINDS`), ``pitch`` [U, V], ``lenses`` [S, T], ``first_lens_pixel`` and
-      ``from`` (where the grid came from); ``calibration`` and ``flat_field`` when they apply.
+      :data:`GRID_KINDS`), ``pitch`` [U, V], ``lenses`` [S, T], ``from`` (where the grid came
+      from) and ``first_lens_pixel`` (aligned) or ``packing``, ``features``, ``lens_origin``
+      (resampled); ``calibration`` and ``flat_field`` when they apply.
     * ``mosaic``: the decoded raw (pattern, noise profile, colour metadata).
     * ``lenses``: (S, T) of the light field.
     * ``seconds``: parts of this stage worth timing apart (``calibrate`` with a white image).
+    * ``sampling``: for ``resampled``, the :class:`lfcl.resampling.SamplingModel` (where every
+      regular sample lies on the sensor); None for ``aligned-square``.
 
-    A Grid for other lattices (rotated, non-integer pitch, hexagonal) names its kind in
-    ``geometry["grid"]`` and adds what the demosaic needs to sample it; the Demosaic stage
-    refuses a kind it does not know.
+    The Demosaic stage refuses a kind it does not know.
     """
 
     data: np.ndarray
@@ -69,6 +76,7 @@ class Gridded(NamedTuple):
     mosaic: Mosaic
     lenses: tuple
     seconds: dict = {}  # noqa: RUF012 (a NamedTuple default; never mutated)
+    sampling: object = None  # lfcl.resampling.SamplingModel for the "resampled" kind
 
 
 class Demosaiced(NamedTuple):
@@ -86,6 +94,26 @@ class Written(NamedTuple):
     paths: list  # the files written, in order
     plan: object  # lfcl.outputs.OutputPlan
     seconds: dict  # kind -> write seconds
+
+
+def grid_words(geometry: dict) -> str:
+    """``hexagonal``, ``rotated, non-integer-pitch square`` or ``aligned square``: a grid kind in words."""
+    if geometry.get("grid") != "resampled":
+        return "aligned square"
+    if geometry.get("packing") == "hex":
+        return "hexagonal"
+    return f"{', '.join(geometry.get('features') or ['non-aligned'])} square"
+
+
+def check_method_for_grid(method: str, kind: str, what: str = "") -> None:
+    """A one-line ``ValueError`` when ``method`` does not run on a grid of ``kind`` (``what``: the grid, for the
+    message), naming the methods that do."""
+    if kind == "resampled":
+        from .grid_demosaic import GRID_METHOD_NAMES
+
+        if method not in GRID_METHOD_NAMES:
+            raise ValueError(f"method {method!r} does not run on {what or 'a resampled lens grid'}: the resampling "
+                             f"path (rotated, non-integer-pitch, hexagonal grids) takes {', '.join(GRID_METHOD_NAMES)}")
 
 
 def _need(value, kind, stage: str, what: str):
@@ -120,7 +148,12 @@ class Decode:
 class Grid:
     """Mosaic -> :class:`Gridded`: an aligned square lens grid from ``pitch`` (at pixel 0, 0),
     a ``calibration`` file (``lfcl calibrate``) or a ``white`` image (calibrated first).
-    Give at most one; none means ``pitch=9``."""
+    Give at most one; none means ``pitch=9``.
+
+    A calibration of an aligned square grid of integer pitch (lfcl.calib.aligned.fit_grid)
+    gives the ``aligned-square`` kind, sliced exactly; any other calibrated grid (rotated,
+    non-integer pitch, offset by a fraction of a pixel, hexagonal) the ``resampled`` kind
+    with its sampling model (lfcl.resampling.sampling_model, docs/geometry.md)."""
 
     name = "grid"
 
@@ -148,7 +181,7 @@ class Grid:
         lens_response = None
         if self.calibration is not None or self.white is not None:
             from .calib import calibrate_white, load_calibration
-            from .calib.aligned import aligned_geometry, calibration_metadata
+            from .calib.aligned import ALIGNED, calibration_metadata, fit_grid
 
             if self.calibration is not None:
                 cal = load_calibration(self.calibration, mosaic.shape, mosaic.pattern)
@@ -159,8 +192,10 @@ class Grid:
                 cal.check(mosaic.shape, mosaic.pattern, what=Path(mosaic.source).name or "the raw")
                 seconds["calibrate"] = time.perf_counter() - start
                 how, what, src = "--white", f"white image {self.white}", self.white
-            geo = aligned_geometry(cal, what)
+            geo = fit_grid(cal, what)
             meta["calibration"] = calibration_metadata(cal, how, src, geo)
+            if geo["kind"] != ALIGNED:
+                return _resampled(mosaic, cal, geo, how, meta, seconds)
             P, (r0, c0), (S, T) = geo["pitch"], geo["first"], geo["lenses"]
             if cal.weight is not None:  # the white image's vignetting: flat-field, weight the data term
                 from .flatfield import lens_response_from_calibration
@@ -181,19 +216,39 @@ class Grid:
                        seconds)
 
 
+def _resampled(mosaic: Mosaic, cal, geo: dict, how: str, meta: dict, seconds: dict) -> Gridded:
+    """The ``resampled`` kind of a calibrated grid: the whole sensor and its sampling model."""
+    from .resampling import sampling_model
+
+    sampling = sampling_model(cal, mosaic.pattern)
+    (U, V), (S, T) = sampling.views, sampling.lenses
+    meta["geometry"] = {"grid": "resampled", "pitch": [U, V], "lenses": [S, T], "from": how,
+                        "packing": cal.grid.packing, "features": list(geo["features"]),
+                        "lens_origin": list(sampling.lens_origin)}
+    if cal.weight is not None:
+        meta["flat_field"] = {"response": "the calibration's weight model, micro-image cores scaled to median 1",
+                              "left_out_below": sampling.threshold,
+                              "data_term_weight": "response^2 (docs/geometry.md)"}
+    return Gridded(mosaic.data, int(U), (0, 0), None, meta, mosaic, (S, T), seconds, sampling)
+
+
 class Demosaic:
-    """Gridded -> :class:`Demosaiced` with ``lfcl.methods.demosaic_lightfield``.
+    """Gridded -> :class:`Demosaiced` with ``lfcl.methods.demosaic_lightfield`` (``aligned-square``) or
+    ``lfcl.grid_demosaic.demosaic_resampled`` (``resampled``: auto, malvar, admm-uv, admm-st, admm-uvst).
 
     ``lam``/``iterations`` ``None``: follow the noise level (docs/admm.md); ``strength``
-    multiplies the default lambda. ``max_memory``: device bytes the solver may use (None:
-    80 % of the device's; a larger admm-uv problem runs in bands of lens rows).
+    multiplies the default lambda. ``tolerance_db``: stop the ADMM iterations once one can
+    move PSNR by less than this (docs/auto.md); None: the method's own rule.
+    ``max_memory``: device bytes the solver may use (None: 80 % of the device's; a larger
+    admm-uv problem on an aligned grid runs in bands of lens rows).
     ``device``: an OpenCL device spec or None (``LFCL_DEVICE``, else the first device).
     ``callback(record, x)``: called after every ADMM iteration (progress bars)."""
 
     name = "demosaic"
 
     def __init__(self, method: str = "admm-uv", lam: float | None = None, iterations: int | None = None,
-                 strength: float = 1.0, device=None, callback=None, max_memory: int | None = None):
+                 strength: float = 1.0, device=None, callback=None, max_memory: int | None = None,
+                 tolerance_db: float | None = None):
         from .methods import parse_method
 
         try:
@@ -210,41 +265,64 @@ class Demosaic:
         if max_memory is not None and (isinstance(max_memory, bool) or not isinstance(max_memory, (int, np.integer))
                                        or max_memory < 1):
             raise ValueError(f"Demosaic: max_memory must be a number of bytes >= 1 or None, got {max_memory!r}")
+        if tolerance_db is not None and (isinstance(tolerance_db, bool) or not isinstance(tolerance_db, (int, float))
+                                         or not math.isfinite(tolerance_db) or not tolerance_db > 0):
+            raise ValueError(f"Demosaic: tolerance_db must be a number of dB > 0 or None, got {tolerance_db!r}")
+        self.tolerance_db = None if tolerance_db is None else float(tolerance_db)
         self.lam, self.iterations, self.strength = lam, iterations, float(strength)
         self.max_memory = None if max_memory is None else int(max_memory)
         self.device, self.callback = device, callback
 
     def options(self) -> dict:
         return {"method": self.method, "lambda": self.lam, "iterations": self.iterations, "strength": self.strength,
-                "max_memory": self.max_memory}
+                "tolerance_db": self.tolerance_db, "max_memory": self.max_memory}
 
     def __call__(self, gridded: Gridded) -> Demosaiced:
         _need(gridded, Gridded, "Demosaic", "a Gridded (from Grid)")
         kind = gridded.metadata.get("geometry", {}).get("grid")
         if kind not in GRID_KINDS:
             raise ValueError(f"Demosaic: lens grid {kind!r} is not one it takes ({', '.join(GRID_KINDS)})")
+        if kind == "resampled" and gridded.sampling is None:
+            raise ValueError("Demosaic: a resampled lens grid needs its sampling model (Gridded.sampling)")
+        try:
+            check_method_for_grid(self.method, kind, f"the {grid_words(gridded.metadata['geometry'])} lens grid")
+        except ValueError as e:
+            raise ValueError(f"Demosaic: {e}") from None
         from . import __version__
-        from .layout import LightFieldShape, planes_to_exchange
-        from .methods import demosaic_lightfield
         from .noise import from_noise_profile
 
         mosaic, P = gridded.mosaic, gridded.pitch
         noise = None
         if mosaic.noise_profile is not None and self.method != "malvar":
             noise = from_noise_profile(mosaic.noise_profile, gridded.data)
-        result = demosaic_lightfield(gridded.data, mosaic.pattern, (P, P), self.method, origin=gridded.origin,
-                                     lam=self.lam, iterations=self.iterations, strength=self.strength, noise=noise,
-                                     device=self.device, callback=self.callback,
-                                     lens_response=gridded.lens_response, max_memory=self.max_memory)
-        S, T = gridded.lenses
-        lightfield = planes_to_exchange(result.planes, LightFieldShape(S, T, P, P))
+        extra: dict = {}
+        if kind == "resampled":
+            from .grid_demosaic import demosaic_resampled
+
+            result = demosaic_resampled(gridded.data, mosaic.pattern, gridded.sampling, self.method, lam=self.lam,
+                                        iterations=self.iterations, strength=self.strength, noise=noise,
+                                        device=self.device, callback=self.callback, max_memory=self.max_memory,
+                                        tolerance_db=self.tolerance_db)
+            lightfield = result.lightfield
+            extra["sampling"] = result.sampling.as_meta()
+        else:
+            from .layout import LightFieldShape, planes_to_exchange
+            from .methods import demosaic_lightfield
+
+            result = demosaic_lightfield(gridded.data, mosaic.pattern, (P, P), self.method, origin=gridded.origin,
+                                         lam=self.lam, iterations=self.iterations, strength=self.strength,
+                                         noise=noise, device=self.device, callback=self.callback,
+                                         lens_response=gridded.lens_response, max_memory=self.max_memory,
+                                         tolerance_db=self.tolerance_db)
+            S, T = gridded.lenses
+            lightfield = planes_to_exchange(result.planes, LightFieldShape(S, T, P, P))
         meta = {
             "method": self.method, "parameters": result.parameters, "source": mosaic.source,
             "pattern": mosaic.pattern, "geometry": gridded.metadata["geometry"],
             "iterations": result.iterations, "stop_reason": result.stop_reason,
             "noise_sigma": None if result.noise is None else result.noise.sigma,
             "input": mosaic.metadata(), "generator": f"lfcl {__version__} stages",
-            **{k: v for k, v in gridded.metadata.items() if k != "geometry"},
+            **{k: v for k, v in gridded.metadata.items() if k != "geometry"}, **extra,
         }
         return Demosaiced(result, lightfield, meta, mosaic)
 
@@ -347,7 +425,8 @@ class Pipeline:
     ``seconds`` (per stage: ``decode``, ``grid``, ``demosaic``, ``outputs``, and
     ``calibrate`` when the grid came from a white image; ``grid`` is then the rest of that
     stage), and with an Outputs stage ``format``, ``previews``, ``colour``, ``outputs``,
-    ``refocus``, ``skipped``, ``output_seconds``. With an Outputs stage the summary is also
+    ``refocus``, ``skipped`` (with ``auto``: also the candidates it skipped, lfcl/auto_report.py),
+    ``output_seconds``. With an Outputs stage the summary is also
     written as ``summary.json``, last, with the other files: all of them or none.
     ``finish(summary) -> summary`` (optional) edits the summary before it is written and
     returned. After a run, ``pipeline.lightfield`` holds the light field.
@@ -409,7 +488,8 @@ class Pipeline:
         compute = time.perf_counter() - start
         summary.update({"format": plan.image_format, "previews": plan.previews, "colour": plan.colour,
                         "outputs": [f.name for f in plan.files], "refocus": plan.refocus,
-                        "skipped": _skipped(plan, outputs.outputs)})
+                        "skipped": _skipped(plan, outputs.outputs)
+                        + skipped_by_auto(demosaiced.metadata["parameters"].get("auto"))})
         write: dict = {}
 
         def final() -> dict:  # called when summary.json is written (last), and after

@@ -246,22 +246,24 @@ def test_white_image_calibrates_first(capture, tmp_path):
     assert response.shape == (9, 9) and response.max() == pytest.approx(1.0, abs=1e-3)
 
 
-@pytest.mark.parametrize("args,geometry", [
-    (["--rotation", "0.5"], "rotated square"),
-    (["--pitch", "9.4"], "non-integer-pitch square"),
-    (["--packing", "hex", "--pitch", "10"], "hexagonal"),
+@pytest.mark.parametrize("args,features", [
+    (["--rotation", "0.5"], ["rotated"]),
+    (["--pitch", "9.4"], ["non-integer-pitch"]),
+    (["--packing", "hex", "--pitch", "10"], ["hexagonal"]),
 ])
-def test_other_grids_are_not_implemented(capture, tmp_path, args, geometry):
+def test_other_grids_are_resampled(capture, tmp_path, args, features):
+    """Any grid but an aligned square one of integer pitch takes the resampling path (tests/test_process_grids.py)."""
     cal = tmp_path / "cal.json"
     result = CliRunner().invoke(cli, ["calibrate", "--sensor-shape", f"{S * 9}x{T * 9}", "-o", cal,
                                       *(["--pitch", "9"] if "--pitch" not in args else []), *args])
     assert result.exit_code == 0, result.output
     out = tmp_path / "out"
-    result = run(capture / "raw.dng", "--method", "malvar", "-o", out, "--calibration", cal)
-    assert result.exit_code == 1
-    lines = result.output.strip().splitlines()
-    assert len(lines) == 1 and "not implemented yet" in lines[0] and geometry in lines[0], result.output
-    assert not out.exists()
+    result = run(capture / "raw.dng", "--method", "malvar", "-o", out, "--outputs", "lightfield", "--calibration",
+                 cal, "--json")
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.output)
+    assert summary["geometry"]["grid"] == "resampled" and summary["geometry"]["features"] == features
+    assert np.load(out / "lightfield.npy").shape == (*summary["lenses"], *summary["sampling"]["views"], 3)
 
 
 def test_calibration_for_another_sensor(capture, tmp_path):

@@ -118,3 +118,24 @@ def test_process_bad_inputs(tmp_path):
     assert not (tmp_path / "out").exists()
     result = CliRunner().invoke(cli, ["process", str(junk), "-o", str(tmp_path / "out"), "--outputs", "center,nope"])
     assert result.exit_code == 1 and "unknown outputs" in result.output
+
+
+def test_the_progress_bar_takes_every_method_name():
+    """`lfcl process`'s bar: its total for any name of METHODS (auto chooses during the run: no total)."""
+    from types import SimpleNamespace
+
+    from lfcl.commands.process import IterationBar, iteration_total
+    from lfcl.method_names import METHODS
+    from lfcl.methods import ADMM_DEFAULTS
+
+    for method in METHODS:
+        cap = ADMM_DEFAULTS[method].max_iter if method in ADMM_DEFAULTS else None
+        assert iteration_total(method) == cap
+        assert iteration_total(method, tolerance_db=0.5) == (None if cap is None else max(cap, 60))
+        assert iteration_total(method, iterations=7) == 7
+        bar = IterationBar(method, None)
+        for i in (1, 2, 1):  # the third starts a second band of lens rows
+            bar(SimpleNamespace(iteration=i, rms_change=1e-3), None)
+        assert bar.bar.total == cap and bar.band == 1
+        bar.close()
+    assert iteration_total("auto") is None

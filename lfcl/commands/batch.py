@@ -31,9 +31,12 @@ def _warm(settings):
         return None
     if settings.calibration is not None:
         from ..calib import load_calibration
+        from ..calib.aligned import ALIGNED, fit_grid
 
-        grid = load_calibration(settings.calibration).grid  # a broken file: one error now, not one per capture
-        return (settings.method, round(grid.pitch)) if grid.packing == "square" else None
+        cal = load_calibration(settings.calibration)  # a broken file: one error now, not one per capture
+        geo = fit_grid(cal, f"calibration {settings.calibration}")
+        # a resampled grid's programs are compiled by each worker's first capture
+        return (settings.method, geo["pitch"]) if geo["kind"] == ALIGNED else None
     return settings.method, settings.pitch or DEFAULT_PITCH
 
 

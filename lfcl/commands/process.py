@@ -40,7 +40,9 @@ _OPTIONS = (
                       "(not with --calibration / --white)."),
     click.option("--calibration", type=click.Path(path_type=Path, readable=False), default=None,
                  metavar="CAL.json",
-                 help="Lens grid from `lfcl calibrate`: pitch and first lens from it (aligned square grids only)."),
+                 help="Lens grid from `lfcl calibrate`. An aligned square grid of integer pitch is sliced exactly; "
+                      "a rotated, non-integer-pitch or hexagonal one is resampled inside the solver "
+                      "(docs/geometry.md; methods auto, malvar, admm-uv, admm-st, admm-uvst)."),
     click.option("--white", type=click.Path(path_type=Path, readable=False), default=None, metavar="WHITE",
                  help="Calibrate from this white image first (as `lfcl calibrate WHITE`), then as --calibration."),
     click.option("--pattern", default=None, help="Bayer pattern; required for EXR/TIFF/PNG mosaics, read from raws."),
@@ -58,6 +60,10 @@ _OPTIONS = (
     click.option("--iterations", default=None, type=click.IntRange(min=1),
                  help="Run exactly this many ADMM iterations; default: the method's early-stopping rule."),
     click.option("--strength", default=1.0, show_default=True, type=float, help="Multiplier on the default lambda."),
+    click.option("--tolerance-db", "tolerance_db", default=None, type=click.FloatRange(min=0, min_open=True),
+                 metavar="DB",
+                 help="Stop the ADMM iterations once one can move PSNR by less than DB dB (docs/auto.md); "
+                      "default: the method's own stopping rule. With --iterations: at most that many."),
     click.option("--max-memory", default=None, type=click.FloatRange(min=0.01), metavar="GIB",
                  help="Device memory the solver may use, GiB; default 80% of the device's. A larger admm-uv "
                       "problem runs in bands of lens rows (exact: the (u, v) prior couples no two lenses)."),
@@ -86,7 +92,8 @@ class ProcessSettings:
 
     ``outputs``: the output kinds (``refocus`` added when ``--refocus`` was given);
     ``refocus``: the slopes spec (None when refocus is not among the outputs);
-    ``max_memory``: bytes or None; ``recipe``: what the outputs record about a
+    ``max_memory``: bytes or None; ``tolerance_db``: the ADMM stop in dB or None (the
+    method's rule); ``recipe``: what the outputs record about a
     ``--pipeline`` recipe (name, path, options, from_command_line) or None.
     """
 
@@ -105,6 +112,7 @@ class ProcessSettings:
     max_memory: int | None = None
     device: str | None = None
     recipe: dict | None = None
+    tolerance_db: float | None = None
 
     def pipeline(self, callback=None):
         """The :class:`lfcl.stages.Pipeline` of these settings; ``callback``: per ADMM iteration (progress)."""
@@ -118,7 +126,8 @@ class ProcessSettings:
             Decode(self.pattern),
             Grid(pitch=self.pitch, calibration=self.calibration, white=self.white, pattern=self.pattern),
             Demosaic(self.method, lam=self.lam, iterations=self.iterations, strength=self.strength,
-                     device=self.device, callback=callback, max_memory=self.max_memory),
+                     device=self.device, callback=callback, max_memory=self.max_memory,
+                     tolerance_db=self.tolerance_db),
             Outputs(list(self.outputs), refocus=self.refocus or DEFAULT_REFOCUS, fmt=self.fmt,
                     previews=self.previews, metadata=extra),
         ])
@@ -184,15 +193,31 @@ def settings_from_options(options: dict, ctx: click.Context | None = None) -> Pr
         raise FileNotFoundError(f"calibration {str(calibration)!r} does not exist")
     if white is not None and not Path(white).is_file():
         raise FileNotFoundError(f"white image {str(white)!r} does not exist")
-    max_memory = options["max_memory"]
+    if calibration is not None:
+        _check_method_for_calibration(method, calibration)
+    max_memory, tolerance_db = options["max_memory"], options.get("tolerance_db")
     settings = ProcessSettings(
         method=method, pitch=pitch, calibration=None if calibration is None else str(calibration),
         white=None if white is None else str(white), pattern=options["pattern"], outputs=tuple(wanted),
         refocus=refocus_spec, fmt=fmt, previews=bool(previews), lam=lam, iterations=iterations,
         strength=float(strength), max_memory=None if max_memory is None else int(max_memory * 2**30),
-        device=options["device"], recipe=recipe_meta)
+        device=options["device"], recipe=recipe_meta,
+        tolerance_db=None if tolerance_db is None else float(tolerance_db))
     settings.pipeline()  # the stages check the rest (--strength, --lambda, ...), still before any work
     return settings
+
+
+def _check_method_for_calibration(method: str, calibration) -> None:
+    """A method the calibration's grid path does not run: one line before any raw is read (once per batch)."""
+    from ..calib import load_calibration
+    from ..calib.aligned import describe_grid, fit_grid
+    from ..stages import check_method_for_grid, grid_words
+
+    cal = load_calibration(calibration)
+    what = f"calibration {calibration}"
+    geo = fit_grid(cal, what)
+    words = grid_words({"grid": geo["kind"], "packing": cal.grid.packing, "features": geo["features"]})
+    check_method_for_grid(method, geo["kind"], f"the {words} lens grid of {what} ({describe_grid(cal)})")
 
 
 def process_summary(summary: dict) -> dict:
@@ -215,20 +240,34 @@ def run_capture(settings: ProcessSettings, raw, out_dir, callback=None) -> dict:
     return settings.pipeline(callback).run(raw, out_dir, finish=process_summary)
 
 
+def iteration_total(method: str, iterations: int | None = None, tolerance_db: float | None = None) -> int | None:
+    """The most ADMM iterations ``method`` runs (a progress bar's total), or None when unknown before the run.
+
+    Any name of lfcl.method_names.METHODS: an explicit ``iterations``; else the method's cap
+    (lfcl.methods.admm_params: with ``tolerance_db``, at least 60); None for ``auto`` (the
+    method is chosen during the run) and for methods without ADMM iterations (no bar is drawn).
+    """
+    if iterations is not None:
+        return int(iterations)
+    from ..methods import ADMM_DEFAULTS
+
+    defaults = ADMM_DEFAULTS.get(method)
+    if defaults is None:
+        return None
+    return max(defaults.max_iter, 60) if tolerance_db is not None else defaults.max_iter
+
+
 class IterationBar:
     """A tqdm bar over the ADMM iterations on stderr (terminals only), made on the first iteration."""
 
-    def __init__(self, method: str, iterations: int | None):
-        self.method, self.iterations, self.bar, self.band = method, iterations, None, 0
+    def __init__(self, method: str, iterations: int | None, tolerance_db: float | None = None):
+        self.method, self.iterations, self.tolerance_db, self.bar, self.band = method, iterations, tolerance_db, None, 0
 
     def __call__(self, record, x):
         if self.bar is None:
             from tqdm import tqdm
 
-            from ..methods import ADMM_DEFAULTS
-
-            defaults = ADMM_DEFAULTS.get(self.method)
-            total = self.iterations if self.iterations is not None else getattr(defaults, "max_iter", None)
+            total = iteration_total(self.method, self.iterations, self.tolerance_db)
             self.bar = tqdm(total=total, desc=self.method, unit="it", disable=None, leave=False, file=sys.stderr,
                             dynamic_ncols=True)
         elif record.iteration == 1:  # a new band of lens rows
@@ -253,7 +292,7 @@ class IterationBar:
 def command(raw, out_dir, as_json, **options):
     """Demosaic a lenslet RAW (DNG, camera raw, or EXR/TIFF/PNG mosaic) into a 4D light field."""
     settings = settings_from_options(options)
-    bar = None if as_json else IterationBar(settings.method, settings.iterations)
+    bar = None if as_json else IterationBar(settings.method, settings.iterations, settings.tolerance_db)
     try:
         summary = run_capture(settings, raw, out_dir, callback=bar)
     finally:
@@ -267,19 +306,38 @@ def command(raw, out_dir, as_json, **options):
 
 def summary_text(raw, out_dir, summary: dict) -> str:
     """The run on one screen: geometry, method, time per stage, what was written and what was skipped."""
+    from ..stages import grid_words
+
     S, T = summary["lenses"]
-    P = summary["geometry"]["pitch"][0]
     geo = summary["geometry"]
-    lines = [f"{raw} -> {out_dir}  ({S}x{T} lenses of {P}x{P} px from {geo['from']}, {summary['pattern']}"
-             + (f", first lens at pixel {geo['first_lens_pixel'][0]},{geo['first_lens_pixel'][1]}"
-                if any(geo["first_lens_pixel"]) else "") + ")"]
+    U, V = geo["pitch"]
+    if geo["grid"] == "resampled":
+        lines = [f"{raw} -> {out_dir}  ({S}x{T} lenses of {U}x{V} views from {geo['from']}, {summary['pattern']})",
+                 f"path: resampled ({grid_words(geo)} grid): the regular light field "
+                 "is fitted to the sensor samples through the resampling (lfcl.grid_demosaic, docs/geometry.md)"]
+    else:
+        lines = [f"{raw} -> {out_dir}  ({S}x{T} lenses of {U}x{V} px from {geo['from']}, {summary['pattern']}"
+                 + (f", first lens at pixel {geo['first_lens_pixel'][0]},{geo['first_lens_pixel'][1]}"
+                    if any(geo["first_lens_pixel"]) else "") + ")",
+                 "path: aligned square grid of integer pitch, sliced exactly (lfcl.methods)"]
     if "calibration" in summary:
         c = summary["calibration"]
+        deviation = c["aligned_max_deviation_px"]
+        off = ("" if deviation is None else
+               f"; aligned within {deviation:.2f} px" if geo["grid"] != "resampled" else
+               f"; up to {deviation:.2f} px off an aligned grid")
         lines.append(f"calibration: {c['packing']} grid, pitch {c['pitch_px']:.4f} px, rotation "
-                     f"{c['rotation_deg']:+.4f} deg; aligned within {c['aligned_max_deviation_px']:.2f} px")
+                     f"{c['rotation_deg']:+.4f} deg{off}")
     params = summary["parameters"]
     lam = f", lambda {params['lam']:.3g}" if "lam" in params else ""
-    lines.append(f"method {summary['method']}: {summary['iterations']} iterations ({summary['stop_reason']}){lam}")
+    tolerance = summary.get("options", {}).get("tolerance_db")
+    stop = f", tolerance {tolerance:g} dB" if tolerance is not None and summary["iterations"] else ""
+    auto = params.get("auto")
+    method = summary["method"]
+    if auto:
+        strength = f" at strength {auto['strength']:g}" if auto["strength"] != 1 else ""
+        method = f"auto -> {auto['method']}{strength} ({auto['reason']})\n  ran {auto['method']}"
+    lines.append(f"method {method}: {summary['iterations']} iterations ({summary['stop_reason']}){lam}{stop}")
     secs = summary["seconds"]
     lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in secs.items()))
     per = summary.get("output_seconds", {})
