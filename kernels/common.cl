@@ -105,6 +105,48 @@ inline float16 laplacian(__global const float *plane, float16 xi, int row, int c
     }
     return acc;
 }
+
+// With dark pixels left out of the prior (docs/admm.md): lanes linked to their neighbour one
+// step along dim d (direction dir), i.e. the neighbour exists and both samples have a lens
+// weight > 0. Whether the two lens pixels are both lit repeats from lens to lens, so the host
+// tabulates it for every run of 16 columns: `links` holds, for each (dim, direction) pair
+// 2 * (0: u, 1: v, 2: s, 3: t) + (dir > 0), lens row u and column phase col0 % V, 16 floats
+// (1: both lit), in that order (lfcl/ops/gradient.py link_table): one aligned load a run.
+inline int16 linked(__global const float *links, int d, int dir, int row, int16 cols, int height, int width)
+{
+    const int pair = 2 * (d == DIM_U ? 0 : d == DIM_V ? 1 : d == DIM_S ? 2 : 3) + (dir > 0);
+    const float16 lit = vload16((pair * PITCH_U + row % PITCH_U) * PITCH_V + cols.s0 % PITCH_V, links);
+    return has_neighbour(d, dir, row, cols, height, width) & (lit != 0.0f);
+}
+
+// laplacian() over the linked pairs only: D^T M D x with M the mask of linked differences.
+inline float16 linked_laplacian(__global const float *links, __global const float *plane, float16 xi,
+                                int row, int col0, int height, int width)
+{
+    const int16 cols = lane_columns(col0);
+    float16 acc = (float16)0.0f;
+    for (int d = 1; d <= DIM_T; d <<= 1) {
+        if (!(DIMS & d)) continue;
+        for (int dir = -1; dir <= 1; dir += 2) {
+            const float16 other = neighbour(plane, d, dir, row, col0, height, width);
+            acc += select((float16)0.0f, xi - other, linked(links, d, dir, row, cols, height, width));
+        }
+    }
+    return acc;
+}
+
+// PRIOR_MASK (build-time, 0 or 1): whether the prior's differences are masked by the lens
+// weights. LINK is then linked() with the kernel's `links` argument, else has_neighbour().
+#ifndef PRIOR_MASK
+#define PRIOR_MASK 0
+#endif
+#if PRIOR_MASK
+#define LINK(d, dir, row, cols, height, width) linked(links, d, dir, row, cols, height, width)
+#define LAPLACIAN(plane, xi, row, col0, height, width) linked_laplacian(links, plane, xi, row, col0, height, width)
+#else
+#define LINK(d, dir, row, cols, height, width) has_neighbour(d, dir, row, cols, height, width)
+#define LAPLACIAN(plane, xi, row, col0, height, width) laplacian(plane, xi, row, col0, height, width)
+#endif
 #endif
 
 // Flat arrays are processed in chunks of 16 floats (one SIMD register on a CPU);

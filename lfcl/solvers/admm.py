@@ -3,15 +3,22 @@
 Solves the paper's problem (section 3.4) over the sensor-shaped planes of
 docs/layout.md::
 
-    min_x 1/2 ||A x - b||^2 + lam ||D x||_1
+    min_x 1/2 ||A x - b||^2 + lam ||D x||_1 (+ lam_xc ||D C x||_1)
 
 with A the CFA sampling, D forward differences over the chosen dims of
-(u, v, s, t), per channel (anisotropic TV). Scaled-form ADMM with z = D x:
+(u, v, s, t), per channel (anisotropic TV), and optionally the cross-channel
+prior on the colour differences C x = (x_R - x_G, x_B - x_G) (docs/admm.md).
+Scaled-form ADMM with z = K x, K = D or [D; D C]:
 
-    x <- (A^T A + rho D^T D)^{-1} (A^T b + rho D^T (z - u))   Jacobi-PCG, warm-started,
+    x <- (A^T A + rho K^T K)^{-1} (A^T b + rho K^T (z - u))   Jacobi-PCG, warm-started,
                                                                or exact per lens for (u, v)
-    z <- S_{lam/rho}(D x + u)                                  soft-thresholding
-    u <- u + D x - z                                           scaled dual update
+    z <- S_{lam/rho}(K x + u)   (lam_xc/rho on the D C block)  soft-thresholding
+    u <- u + K x - z                                           scaled dual update
+
+With lens weights that leave dark pixels out of the data term, the prior leaves
+them out too (params.prior_mask): K = M [D; D C], M dropping every difference
+that touches such a pixel; they keep their start value during the iterations and
+get the harmonic extension of their lens's lit pixels at the end (lfcl/ops/lensfill.py).
 
 The start x0 is normally the Malvar demosaic, z0 = D x0 and u0 = 0. It stops
 on the primal/dual residuals (Boyd et al.), on the rms change of x, or after
@@ -39,12 +46,15 @@ import functools
 import math
 
 import numpy as np
+import scipy.ndimage
 
 from ..device import grid_defines
 from ..layout import channel_map, dims_mask, ordered_dims, packed_pattern
 from ..ops import check_device_array
 from ..ops.cfa import CfaSampling
+from ..ops.crosschannel import COLOUR_GRAM, CrossGradient
 from ..ops.gradient import Gradient, gradient_gram_np
+from ..ops.lensfill import LensFill
 from ..ops.linalg import VectorOps
 from ..ops.reduce import Reductions
 from ..ops.shrink import Shrinkage
@@ -52,50 +62,109 @@ from .params import AdmmParams, AdmmResult, IterationRecord, stop_reason
 
 
 @functools.lru_cache(maxsize=8)
-def _lens_laplacian(pitch) -> np.ndarray:
-    """D_uv^T D_uv of one lens as a UV x UV matrix, column by column from unit vectors."""
+def _lens_laplacian(pitch, active: tuple | None = None) -> np.ndarray:
+    """D_uv^T D_uv of one lens as a UV x UV matrix, column by column from unit vectors.
+
+    ``active`` (UV booleans): D_uv^T M D_uv, the differences between active pixels only.
+    """
     U, V = pitch
     eye = np.eye(U * V)
-    return np.stack([gradient_gram_np(eye[j].reshape(1, U, V), (U, V), "uv").ravel() for j in range(U * V)], axis=1)
+    mask = None if active is None else np.reshape(active, (U, V)).astype(np.float64)
+    return np.stack([gradient_gram_np(eye[j].reshape(1, U, V), (U, V), "uv", mask).ravel() for j in range(U * V)],
+                    axis=1)
+
+
+def lens_components_measure_every_colour(pattern: str, origin, pitch, lens_weights, prior_mask: bool) -> bool:
+    """Whether the lens x-update is regular: every part of a lens that the prior connects
+    has a weighted sample of each colour, whatever the lens's Bayer parity.
+
+    Without the mask the (u, v) prior connects the whole lens; with it, only the pixels of
+    weight > 0 that touch (4-neighbours), and pixels of weight 0 are out of the solve.
+    If some part lacks a colour, that colour's constant on it is free: the exact solve
+    would zero it, while CG keeps the warm start's, so CG is used then.
+    """
+    U, V = pitch
+    active = np.asarray(lens_weights, dtype=np.float64).reshape(U, V) > 0
+    if prior_mask:
+        labels, parts = scipy.ndimage.label(active)
+    else:
+        labels, parts = np.ones((U, V), int), 1
+    for ps in range(2):
+        for pt in range(2):
+            colours = channel_map((U, V), pattern, (origin[0] + ps, origin[1] + pt))
+            for part in range(1, parts + 1):
+                inside = (labels == part) & active
+                if any(not np.any((colours == c) & inside) for c in range(3)):
+                    return False
+    return True
+
+
+def _inverse_on(normal: np.ndarray, rows: np.ndarray, regular: bool) -> np.ndarray:
+    """The inverse of a symmetric block restricted to ``rows`` (zero elsewhere), or its
+    pseudo-inverse when it is singular."""
+    sub = normal[np.ix_(rows, rows)]
+    try:
+        inverse = np.linalg.inv(sub) if regular else np.linalg.pinv(sub, hermitian=True)
+    except np.linalg.LinAlgError:
+        inverse = np.linalg.pinv(sub, hermitian=True)
+    full = np.zeros_like(normal)
+    full[np.ix_(rows, rows)] = inverse
+    return full
 
 
 @functools.lru_cache(maxsize=16)
-def lens_block_inverses(pattern: str, origin, pitch, rho: float, lens_weights: tuple | None = None) -> np.ndarray:
-    """(A^T W A + rho D_uv^T D_uv)^-1 restricted to one lens: [4 parities, 3 colours, UV, UV].
+def lens_block_inverses(pattern: str, origin, pitch, rho: float, lens_weights: tuple | None = None,
+                        cross_channel: bool = False, prior_mask: bool = False) -> np.ndarray:
+    """(A^T W A + rho K_uv^T K_uv)^-1 restricted to one lens, rows per output colour.
+
+    K = D_uv: [4 parities, 3 colours, UV, UV], one independent block per colour.
+    K = [D_uv; D_uv C] (``cross_channel``): K^T K = (I + C^T C) (x) D_uv^T D_uv couples the
+    colours, so the lens's 3UV x 3UV inverse is split into its rows of each output
+    colour: [4, 3, UV, 3UV], columns ordered (colour, u, v).
 
     ``lens_weights``: the data-term weight of each of the lens's UV pixels (row-major
     tuple, hashable for the cache); None for all ones.
 
+    ``prior_mask``: the prior keeps only differences between pixels of weight > 0
+    (K = M D_uv); pixels of weight 0 then have zero rows, are left out of the inverse
+    (their rows and columns are 0) and the kernel leaves them unchanged.
+
     Parity 2*ps + pt: the Bayer parity (row, col) of the lens's first sensor pixel. A
-    block is symmetric positive definite when the lens has a pixel of that colour; a
-    colour no pixel of the lens measures (a 1-pixel lens) gets the pseudo-inverse.
-    Cached: every solver of the same camera and rho shares them (read-only).
+    block is symmetric positive definite when the lens has a pixel of each colour it
+    couples; a colour no pixel of the lens measures (a 1-pixel lens) gets the
+    pseudo-inverse. Cached: every solver of the same camera and rho shares them (read-only).
     """
     U, V = pitch
-    laplacian = _lens_laplacian((U, V))
-    weights = np.ones(U * V) if lens_weights is None else np.asarray(lens_weights, dtype=np.float64)
-    blocks = np.empty((4, 3, U * V, U * V), np.float32)
+    UV = U * V
+    weights = np.ones(UV) if lens_weights is None else np.asarray(lens_weights, dtype=np.float64)
+    active = weights > 0 if prior_mask else np.ones(UV, bool)
+    laplacian = _lens_laplacian((U, V), tuple(active) if prior_mask else None)
+    blocks = np.empty((4, 3, UV, 3 * UV if cross_channel else UV), np.float32)
+    coupling = np.eye(3) + COLOUR_GRAM
     for ps in range(2):
         for pt in range(2):
             colours = channel_map((U, V), pattern, (origin[0] + ps, origin[1] + pt)).ravel()
+            measured = [(colours == c) * weights for c in range(3)]
+            if cross_channel:
+                normal = np.diag(np.concatenate(measured)) + rho * np.kron(coupling, laplacian)
+                inverse = _inverse_on(normal, np.tile(active, 3), all(m.any() for m in measured))
+                blocks[2 * ps + pt] = inverse.reshape(3, UV, 3 * UV)
+                continue
             for c in range(3):
-                measured = (colours == c) * weights
-                normal = np.diag(measured) + rho * laplacian
-                try:
-                    inverse = np.linalg.inv(normal) if measured.any() else np.linalg.pinv(normal)
-                except np.linalg.LinAlgError:
-                    inverse = np.linalg.pinv(normal, hermitian=True)
-                blocks[2 * ps + pt, c] = inverse
+                normal = np.diag(measured[c]) + rho * laplacian
+                blocks[2 * ps + pt, c] = _inverse_on(normal, active, measured[c].any())
     blocks.setflags(write=False)
     return blocks
 
 
-def solver_bytes(sensor_shape, dims, exact: bool) -> int:
+def solver_bytes(sensor_shape, dims, exact: bool, cross_channel: bool = False) -> int:
     """Device memory an AdmmSolver.solve needs, with its Malvar start and mosaic (bytes)."""
     H, W = (int(n) for n in sensor_shape)
     planes = 3 * H * W
     k = len(ordered_dims(dims))
     floats = (5 if exact else 9) * planes + 4 * k * planes + 2 * H * W  # planes, CG, z/u/Dx/dz, b and A x
+    if cross_channel:
+        floats += 4 * k * 2 * H * W  # z/u/Dx/dz of the cross-channel block
     return 4 * floats
 
 
@@ -120,6 +189,8 @@ class AdmmSolver:
         self.planes_shape = (3, self.height, self.width)
         self.A = CfaSampling(runtime, sensor_shape, pattern, origin)
         self.D = Gradient(runtime, self.planes_shape, pitch, self.dims)
+        self.DC = CrossGradient(runtime, self.planes_shape, pitch, self.dims)
+        self.fill = LensFill(runtime, self.planes_shape, pitch)
         self.vectors = VectorOps(runtime)
         self.reduce = Reductions(runtime)
         self.shrink = Shrinkage(runtime)
@@ -129,82 +200,117 @@ class AdmmSolver:
         self._weights_key = self._unit_weights
         self._weights = runtime.to_device(np.ones(self.U * self.V, np.float32))
         self._normal_args = (np.int32(self.height), np.int32(self.width), packed_pattern(pattern, origin))
-        self._defines = grid_defines(pitch, dims_mask(self.dims))
+        self._grid_defines = grid_defines(pitch, dims_mask(self.dims))
+        self._cross_channel = False  # K = [D; D C]: set per solve from params.lam_xc
+        self._prior_mask = False  # K = M [D; D C]: set per solve (params.prior_mask and dark pixels)
         self._row_runs = ((self.width + 15) // 16, self.height, 3)  # stencils: 16 columns a work-item
         planes = [runtime.empty(self.planes_shape) for _ in range(3)]
         self._x_prev, self._rhs, self._tmp = planes
         self._cg_buffers = None  # r, P r, p, q: only the CG x-update needs them
         grads = [runtime.empty(self.D.gradient_shape) for _ in range(4)]
         self._z, self._u, self._dx, self._dz = grads
+        self._cross_buffers = None  # zc, uc, D C x, dzc: only the cross-channel prior needs them
         self._mosaic = runtime.empty((self.height, self.width))
 
-    # --- the x-update: (A^T A + rho D^T D) x = rhs by Jacobi-preconditioned CG ---
+    @property
+    def _defines(self) -> tuple:
+        """Build-time constants of the admm program: pitch, dims and the prior's blocks."""
+        return (*self._grid_defines, ("CROSS_CHANNEL", int(self._cross_channel)),
+                ("PRIOR_MASK", int(self._prior_mask)))
+
+    def set_prior_mask(self, enabled: bool):
+        """Leave differences that touch a pixel of lens weight 0 out of the prior (issue #6).
+
+        Only takes effect while some lens weight is 0; solve() sets it from params.prior_mask.
+        """
+        self._prior_mask = bool(enabled) and min(self._weights_key) <= 0
+        mask = np.asarray(self._weights_key).reshape(self.U, self.V) if self._prior_mask else None
+        self.D.set_lens_weights(mask)
+        self.DC.set_lens_weights(mask)
+
+    @property
+    def _links(self):
+        """The table of kept differences the admm kernels read under PRIOR_MASK (else unused)."""
+        return self.D.links.buffer(self._weights)
+
+    def set_cross_channel(self, enabled: bool):
+        """Stack the cross-channel block D C under D in K (solve() sets it from params.lam_xc)."""
+        self._cross_channel = bool(enabled)
+        if enabled and self._cross_buffers is None:
+            self._cross_buffers = [self.runtime.empty(self.DC.gradient_shape) for _ in range(4)]
+
+    # --- the x-update: (A^T W A + rho K^T K) x = rhs by Jacobi-preconditioned CG ---
 
     # --- the fused steps, public so that benchmarks time exactly what the solver runs ---
 
     def normal(self, x, out, rho):
-        """out = (A^T A + rho D^T D) x."""
+        """out = (A^T W A + rho K^T K) x (K = M [D; D C] as set for the current solve)."""
         return self._launch("normal_apply", x, out, rho)
 
     def precondition(self, r, out, rho):
-        """out = r / diag(A^T A + rho D^T D) (Jacobi)."""
+        """out = r / diag(A^T W A + rho K^T K) (Jacobi)."""
         return self._launch("jacobi_apply", r, out, rho)
 
-    def right_hand_side(self, b, z, u, out, rho):
-        """out = A^T b + rho D^T (z - u)."""
+    def right_hand_side(self, b, z, u, out, rho, residual_of=None):
+        """out = A^T W b + rho K^T (z - u), or with ``residual_of`` (an x) that minus M x.
+
+        With the cross-channel block, z and u are the pairs (z of D, z of D C), (u of D, u of D C).
+        """
+        x, flag = (residual_of, np.int32(1)) if residual_of is not None else (b, np.int32(0))
+        if self._cross_channel:
+            (z, zc), (u, uc) = z, u
+            self.runtime.launch(
+                "admm", "build_rhs_xc", self._row_runs, b.data, z.data, u.data, zc.data, uc.data, out.data,
+                *self._normal_args, np.float32(rho), self._weights.data, self._links.data, x.data, flag,
+                defines=self._defines,
+            )
+            return out
         self.runtime.launch(
             "admm", "build_rhs", self._row_runs, b.data, z.data, u.data, out.data,
-            *self._normal_args, np.float32(rho), self._weights.data, defines=self._defines,
+            *self._normal_args, np.float32(rho), self._weights.data, self._links.data, x.data, flag,
+            defines=self._defines,
         )
         return out
 
     def _launch(self, kernel, src, out, rho):
         self.runtime.launch(
             "admm", kernel, self._row_runs, src.data, out.data,
-            *self._normal_args, np.float32(rho), self._weights.data, defines=self._defines,
+            *self._normal_args, np.float32(rho), self._weights.data, self._links.data, defines=self._defines,
         )
         return out
 
     def _every_lens_sees_every_colour(self) -> bool:
-        """Whether every lens has a weighted sample of each colour, whatever its Bayer parity.
-
-        If not, that colour's block is singular (its constant part is free) and the
-        exact solve would zero it, while CG keeps the warm start's: CG is used then.
-        """
-        weights = np.asarray(self._weights_key).reshape(self.U, self.V) > 0
-        for ps in range(2):
-            for pt in range(2):
-                colours = channel_map((self.U, self.V), self.pattern, (self.origin[0] + ps, self.origin[1] + pt))
-                if any(not np.any((colours == c) & weights) for c in range(3)):
-                    return False
-        return True
+        """lens_components_measure_every_colour for this solver's weights and mask."""
+        return lens_components_measure_every_colour(self.pattern, self.origin, (self.U, self.V),
+                                                    self._weights_key, self._prior_mask)
 
     def _uses_lens_solve(self, params: AdmmParams) -> bool:
         if params.x_update == "lens":
             if self.dims != ("u", "v"):
                 raise ValueError(f"x_update 'lens' needs a prior over (u, v) only, not {''.join(self.dims)}")
             if not self._every_lens_sees_every_colour():
-                raise ValueError("x_update 'lens' needs every lens to measure every colour: with this pitch "
-                                 "or these lens weights some lens has none of one colour (use 'cg' or 'auto')")
+                raise ValueError("x_update 'lens' needs every lens (every connected part of it, with dark "
+                                 "pixels left out of the prior) to measure every colour: with this pitch or "
+                                 "these lens weights some has none of one colour (use 'cg' or 'auto')")
             return True
         return params.x_update == "auto" and self.dims == ("u", "v") and self._every_lens_sees_every_colour()
 
-    def lens_solve(self, rhs, x, rho):
-        """x = (A^T A + rho D_uv^T D_uv)^-1 rhs, exactly, lens by lens."""
-        key = (rho, self._weights_key)
+    def lens_solve(self, rhs, x, rho, accumulate: bool = False):
+        """x = (A^T W A + rho K_uv^T K_uv)^-1 rhs, exactly, lens by lens (x += ... with ``accumulate``)."""
+        key = (rho, self._weights_key, self._cross_channel, self._prior_mask)
         if self._inverse is None or self._inverse[0] != key:
             weights = None if self._weights_key == self._unit_weights else self._weights_key
             blocks = lens_block_inverses(self.pattern, tuple(o % 2 for o in self.origin), (self.U, self.V),
-                                         float(rho), weights)
+                                         float(rho), weights, self._cross_channel, self._prior_mask)
             # the kernel reads block columns as float16 runs: transpose, pad i to 16
             UV = self.U * self.V
-            padded = np.zeros((4, 3, UV, -(-UV // 16) * 16), np.float32)
+            padded = np.zeros((4, 3, blocks.shape[-1], -(-UV // 16) * 16), np.float32)
             padded[..., :UV] = blocks.transpose(0, 1, 3, 2)
             self._inverse = (key, self.runtime.to_device(padded))
         self.runtime.launch(
             "admm", "lens_solve", (2 * -(-(self.width // self.V) // 4), self.height // self.U, 3),
             rhs.data, x.data, self._inverse[1].data, np.int32(self.height), np.int32(self.width),
-            defines=self._defines,
+            self._weights.data, np.int32(bool(accumulate)), defines=self._defines,
         )
 
     def _conjugate_gradient(self, x, rhs, rho, max_steps, tol) -> int:
@@ -263,36 +369,55 @@ class AdmmSolver:
         check_device_array(b, (self.height, self.width), "b")
         check_device_array(x0, self.planes_shape, "x0")
         rho, lam = params.rho, params.lam
-        vec, red, D = self.vectors, self.reduce, self.D
+        vec, red, D, DC = self.vectors, self.reduce, self.D, self.DC
+        self.set_cross_channel(params.cross_channel)
+        self.set_prior_mask(params.prior_mask)
+        cross = self._cross_channel
         x = x0.copy()
         exact = self._uses_lens_solve(params)
         D.forward(x, out=self._z)
         self._u.fill(0)
         n_x, n_z = x.size, self._z.size
+        if cross:
+            zc, uc, dxc, dzc = self._cross_buffers
+            DC.forward(x, out=zc)
+            uc.fill(0)
+            n_z += zc.size
         history: list[IterationRecord] = []
         while True:
             vec.copy(x, self._x_prev)
-            self.right_hand_side(b, self._z, self._u, self._rhs, rho)
+            z_blocks, u_blocks = ((self._z, zc), (self._u, uc)) if cross else (self._z, self._u)
+            # the exact solve adds M^-1 (rhs - M x): float32 round-off then scales with the update
+            self.right_hand_side(b, z_blocks, u_blocks, self._rhs, rho, residual_of=x if exact else None)
             if exact:
-                self.lens_solve(self._rhs, x, rho)
+                self.lens_solve(self._rhs, x, rho, accumulate=True)
                 steps = 0
             else:
                 steps = self._conjugate_gradient(x, self._rhs, rho, params.cg_steps, params.cg_tol)
             D.forward(x, out=self._dx)
             self.shrink.zu_update(self._dx, self._z, self._u, self._dz, params.kappa)
             D.adjoint(self._dz, out=self._tmp)
+            if cross:
+                DC.forward(x, out=dxc)
+                self.shrink.zu_update(dxc, zc, uc, dzc, params.kappa_xc)
+                DC.adjoint(dzc, out=self._tmp, accumulate=True)  # K^T (z - z_prev)
             self.runtime.launch(  # W^(1/2) (A x - b)
                 "admm", "weighted_residual", self._row_runs[:2], x.data, b.data, self._mosaic.data,
                 *self._normal_args, self._weights.data, defines=self._defines,
             )
             # the whole history in one round trip to the host
-            primal2, dual2, misfit2, tv, change2 = red.many(
-                ("diff_norm2", self._dx, self._z), ("norm2", self._tmp), ("norm2", self._mosaic),
-                ("abs_sum", self._dx), ("diff_norm2", x, self._x_prev),
-            )
+            requests = [("diff_norm2", self._dx, self._z), ("norm2", self._tmp), ("norm2", self._mosaic),
+                        ("abs_sum", self._dx), ("diff_norm2", x, self._x_prev)]
+            if cross:
+                requests += [("diff_norm2", dxc, zc), ("abs_sum", dxc)]
+            primal2, dual2, misfit2, tv, change2, *cross_sums = red.many(*requests)
+            prior = lam * tv
+            if cross:
+                primal2 += cross_sums[0]
+                prior += params.lam_xc * cross_sums[1]
             record = IterationRecord(
                 iteration=len(history) + 1,
-                objective=0.5 * misfit2 + lam * tv,
+                objective=0.5 * misfit2 + prior,
                 primal_residual=math.sqrt(primal2),
                 dual_residual=rho * math.sqrt(dual2),
                 rms_change=math.sqrt(change2 / n_x),
@@ -303,9 +428,15 @@ class AdmmSolver:
                 callback(record, x)
             primal_scale = dual_scale = 0.0
             if params.abs_tol > 0 or params.rel_tol > 0:
-                primal_scale = math.sqrt(max(red.norm2(self._dx), red.norm2(self._z)))
+                kx2, z2 = red.norm2(self._dx), red.norm2(self._z)
                 D.adjoint(self._u, out=self._tmp)
+                if cross:
+                    kx2, z2 = kx2 + red.norm2(dxc), z2 + red.norm2(zc)
+                    DC.adjoint(uc, out=self._tmp, accumulate=True)
+                primal_scale = math.sqrt(max(kx2, z2))
                 dual_scale = rho * math.sqrt(red.norm2(self._tmp))
             reason = stop_reason(params, record, primal_scale, dual_scale, n_z, n_x)
             if reason:
+                if self._prior_mask:  # dark pixels: neither data nor prior, so the harmonic extension
+                    self.fill(x, np.asarray(self._weights_key).reshape(self.U, self.V), self._weights)
                 return AdmmResult(x=x, history=history, stop_reason=reason)

@@ -13,6 +13,8 @@ class AdmmParams:
     """Settings of the ADMM-TV solver (paper, section 3.4).
 
     lam:        weight of the TV prior (lambda).
+    lam_xc:     weight of the cross-channel prior ||D C x||_1, C x = (x_R - x_G, x_B - x_G)
+                (docs/admm.md); 0 (the paper's problem) leaves that block out of K.
     rho:        augmented-Lagrangian penalty; kappa = lam / rho is the shrinkage threshold.
     max_iter:   ADMM iterations at most.
     cg_steps:   conjugate-gradient steps at most per x-update (warm-started).
@@ -21,12 +23,16 @@ class AdmmParams:
                 (0 disables it).
     change_tol: stop when rms(x_k - x_{k-1}) <= change_tol (0 disables it); the early
                 stop that the noise-matched defaults use (docs/admm.md).
+    prior_mask: leave the differences that touch a pixel of lens weight 0 (a dark, vignetted
+                corner) out of the prior too, not only out of the data term: those pixels
+                then keep their start value (docs/admm.md). No effect without zero weights.
     x_update:   "auto" (exact per-lens solve when the prior is over (u, v) only, else CG),
                 "cg" (always conjugate gradients) or "lens" (exact; (u, v) only). The
                 numpy reference always uses CG.
     """
 
     lam: float = 0.01
+    lam_xc: float = 0.0
     rho: float = 0.3
     max_iter: int = 30
     cg_steps: int = 4
@@ -34,15 +40,19 @@ class AdmmParams:
     abs_tol: float = 0.0
     rel_tol: float = 0.0
     change_tol: float = 0.0
+    prior_mask: bool = True
     x_update: str = "auto"
 
     def __post_init__(self):
-        for name in ("lam", "rho", "cg_tol", "abs_tol", "rel_tol", "change_tol"):
+        for name in ("lam", "lam_xc", "rho", "cg_tol", "abs_tol", "rel_tol", "change_tol"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"ADMM parameter {name} must be a finite number >= 0, got {value!r}")
         if self.rho <= 0:
             raise ValueError(f"ADMM parameter rho must be > 0, got {self.rho!r}")
+        if not isinstance(self.prior_mask, (bool, np.bool_)):
+            raise ValueError(
+                f"ADMM parameter prior_mask must be True or False, got {self.prior_mask!r}")
         if self.x_update not in ("auto", "cg", "lens"):
             raise ValueError(f"ADMM parameter x_update must be 'auto', 'cg' or 'lens', got {self.x_update!r}")
         for name in ("max_iter", "cg_steps"):
@@ -54,15 +64,25 @@ class AdmmParams:
     def kappa(self) -> float:
         return self.lam / self.rho
 
+    @property
+    def kappa_xc(self) -> float:
+        """The cross-channel block's shrinkage threshold lam_xc / rho."""
+        return self.lam_xc / self.rho
+
+    @property
+    def cross_channel(self) -> bool:
+        """Whether K stacks the cross-channel block D C under D."""
+        return self.lam_xc > 0
+
 
 @dataclasses.dataclass
 class IterationRecord:
     """What one ADMM iteration did."""
 
     iteration: int
-    objective: float  # 1/2 ||A x - b||^2 + lam ||D x||_1
-    primal_residual: float  # ||D x - z||
-    dual_residual: float  # rho ||D^T (z - z_prev)||
+    objective: float  # 1/2 ||A x - b||^2 + lam ||D x||_1 (+ lam_xc ||D C x||_1)
+    primal_residual: float  # ||K x - z||, K = D (or [D; D C])
+    dual_residual: float  # rho ||K^T (z - z_prev)||
     rms_change: float  # rms(x_k - x_{k-1})
     cg_steps: int  # CG steps of the x-update (0: exact per-lens solve)
 

@@ -14,12 +14,15 @@ no fused kernels, every operator applied as written.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
 from ..ops.cfa import cfa_adjoint_np, cfa_sample_np
-from ..ops.gradient import gradient_adjoint_np, gradient_gram_np, gradient_np
+from ..ops.crosschannel import COLOUR_GRAM, stacked_prior_np
+from ..ops.gradient import gradient_adjoint_np, gradient_np, linked_count_np
+from ..ops.lensfill import lens_fill_np
 from .params import AdmmParams, AdmmResult, IterationRecord, stop_reason
 
 
@@ -70,21 +73,35 @@ def admm_reference(b, pattern, pitch, dims, params: AdmmParams, x0, origin=(0, 0
 
     ``lens_weights`` [U, V] weight the data term, 1/2 ||W^(1/2) (A x - b)||^2, with the
     same weights under every lens (None: the paper's unweighted term).
+    ``params.lam_xc > 0`` adds the cross-channel prior lam_xc ||D C x||_1: K = [D; D C].
+    ``params.prior_mask`` with zero weights: K = M D (M D C), the differences that touch a
+    pixel of weight 0 left out (docs/admm.md); such a pixel's CG row is 0, so it keeps x0
+    until the end, and then gets the harmonic extension of its lens (lfcl/ops/lensfill.py).
     """
     b = np.asarray(b, dtype=np.float64)
     U, V = pitch
-    w = np.ones((U, V)) if lens_weights is None else np.asarray(lens_weights, dtype=np.float64)
-    w = np.tile(w, (b.shape[0] // U, b.shape[1] // V))  # per sensor pixel
+    lens_w = np.ones((U, V)) if lens_weights is None else np.asarray(lens_weights, dtype=np.float64)
+    w = np.tile(lens_w, (b.shape[0] // U, b.shape[1] // V))  # per sensor pixel
     x0 = np.asarray(x0, dtype=np.float64)
-    diagonal = cfa_adjoint_np(w, pattern, origin) + params.rho * neighbour_count(x0.shape, pitch, dims)
-    return admm_operators(
+    mask = lens_w if params.prior_mask and (lens_w <= 0).any() else None
+    prior, prior_adjoint, prior_weights = (lambda v: gradient_np(v, pitch, dims, mask),
+                                           lambda z: gradient_adjoint_np(z, pitch, dims, mask), 1.0)
+    links = linked_count_np(x0.shape, pitch, dims, mask)  # diag(K^T K)
+    if params.cross_channel:  # per-entry weights lam, lam_xc carry both thresholds
+        prior, prior_adjoint, split = stacked_prior_np(x0.shape, pitch, dims, mask)
+        prior_weights = np.where(np.arange(split + split * 2 // 3) < split, params.lam, params.lam_xc)
+        params = dataclasses.replace(params, lam=1.0)
+        links = links * (1 + np.diag(COLOUR_GRAM))[:, None, None]
+    diagonal = cfa_adjoint_np(w, pattern, origin) + params.rho * links
+    result = admm_operators(
         b, x0, params, w,
         forward=lambda v: cfa_sample_np(v, pattern, origin),
         adjoint=lambda r: cfa_adjoint_np(r, pattern, origin),
-        prior=lambda v: gradient_np(v, pitch, dims),
-        prior_adjoint=lambda z: gradient_adjoint_np(z, pitch, dims),
-        diagonal=diagonal,
+        prior=prior, prior_adjoint=prior_adjoint, diagonal=diagonal, prior_weights=prior_weights,
     )
+    if mask is not None:
+        result.x = lens_fill_np(result.x, mask, pitch)
+    return result
 
 
 def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint, prior, prior_adjoint, diagonal,
@@ -137,3 +154,28 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
         reason = stop_reason(params, record, primal_scale, dual_scale, z.size, x.size)
         if reason:
             return AdmmResult(x=x, history=history, stop_reason=reason)
+
+
+def admm_resampled_reference(b, weights, matrix, shape, dims, params: AdmmParams, x0) -> AdmmResult:
+    """The float64 twin of lfcl/solvers/resampled.py: ``A`` a sparse matrix.
+
+    ``matrix`` maps the regular planes ``[3, S*U, T*V]`` (``shape = (S, T, U, V)``)
+    flattened onto the measured pixels (lfcl/resampling.py ``forward_matrix``);
+    ``b`` and ``weights`` are per measured pixel; ``x0`` the start planes.
+    """
+    import scipy.sparse
+
+    A = scipy.sparse.csr_matrix(matrix, dtype=np.float64)
+    S, T, U, V = shape
+    planes_shape = (3, S * U, T * V)
+    w = np.asarray(weights, dtype=np.float64)
+    diagonal = (np.asarray(A.multiply(A).T @ w).reshape(planes_shape)
+                + params.rho * neighbour_count(planes_shape, (U, V), dims))
+    return admm_operators(
+        b, x0, params, w,
+        forward=lambda v: A @ v.ravel(),
+        adjoint=lambda r: (A.T @ r).reshape(planes_shape),
+        prior=lambda v: gradient_np(v, (U, V), dims),
+        prior_adjoint=lambda z: gradient_adjoint_np(z, (U, V), dims),
+        diagonal=diagonal,
+    )
