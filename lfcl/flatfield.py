@@ -6,7 +6,9 @@ and main-lens vignetting a white image shows): ``b = r (A x) + noise``. Solving
 the pipeline divides the mosaic by ``r`` (flat-field) and weights the data term by
 ``r^2`` (the flat-fielded corners are noisier). Pixels whose response is below a
 threshold (the dark corners between micro-images) get weight 0: they are left out
-of the data term, and their values are filled in by the prior.
+of the data term and of the prior (no difference that touches them is penalised),
+and after the solve each gets the harmonic fill of its lens's lit pixels
+(lfcl/ops/lensfill.py, docs/admm.md).
 
 For an aligned grid the response repeats from lens to lens, so it is one ``U x V``
 array (``lens_response``); the slow main-lens falloff that a calibration also
