@@ -3,4 +3,4 @@
 What each does and its defaults: lfcl/methods.py.
 """
 
-METHODS = ("auto", "malvar", "admm-uv", "admm-st", "admm-uvst")
+METHODS = ("auto", "malvar", "admm-uv", "admm-st", "admm-uvst", "linear4d", "admm-uv-xc", "admm-uvst-xc")

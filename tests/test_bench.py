@@ -12,7 +12,7 @@ from click.testing import CliRunner
 from lfcl.cli import cli
 
 KERNELS = [
-    "copy (reference)", "CFA A", "CFA A^T", "CFA A^T A", "Malvar", "Malvar vs colour-demosaicing",
+    "copy (reference)", "CFA A", "CFA A^T", "CFA A^T A", "Malvar", "Malvar vs colour-demosaicing", "linear4d",
     "D uv", "D^T uv", "D^T D uv", "normal_apply uv", "jacobi_apply uv", "build_rhs uv", "lens_solve uv",
     "D uvst", "D^T uvst", "D^T D uvst", "normal_apply uvst", "jacobi_apply uvst", "build_rhs uvst",
     "dot", "norm2", "diff_norm2", "abs_sum", "soft_threshold", "zu_update", "axpby",
@@ -43,6 +43,7 @@ def test_bench_kernels_json():
     by_name = {k["name"]: k for k in report["kernels"]}
     N, P = 8100, 24300
     assert by_name["CFA A"]["bytes"] == 4 * 2 * N
+    assert by_name["linear4d"]["bytes"] == 4 * 4 * N
     assert by_name["D uvst"]["bytes"] == 4 * 5 * P
     assert by_name["zu_update"]["bytes"] == 4 * 6 * P
     assert by_name["norm2"]["bytes"] == 4 * P

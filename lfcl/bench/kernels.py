@@ -145,6 +145,22 @@ def buffer_specs(height: int, width: int) -> dict:
     return specs
 
 
+def linear4d_cases(runtime, sensor, pitch) -> list[Case]:
+    """The learned 4D linear demosaic with its shipped coefficients (the 12-lux set), where they fit the pitch."""
+    from ..ops.linear4d import Linear4d, linear4d_np, load_model
+
+    model = load_model()
+    if tuple(pitch) != model.pitch:
+        return []
+    coefficients = model.coefficients[model.metadata["lux"].index(12.0)] if 12.0 in model.metadata["lux"] \
+        else model.coefficients[0]
+    op = Linear4d(runtime, sensor, PATTERN, pitch, model.taps, coefficients)
+    N = sensor[0] * sensor[1]
+    return [Case("linear4d", "linear4d.cl:linear4d", "read N + write 3N", 4 * N, ("b", "y"),
+                 lambda d: op.forward(d["b"], out=d["y"]),
+                 lambda h: linear4d_np(h["b"], PATTERN, pitch, model.taps, coefficients))]
+
+
 def build_cases(runtime, height: int, width: int, pitch) -> list[Case]:
     """The benchmarked kernels, in run order (big gradient buffers last but one group)."""
     N, P = height * width, 3 * height * width
@@ -176,6 +192,7 @@ def build_cases(runtime, height: int, width: int, pitch) -> list[Case]:
         cases.append(Case("Malvar vs colour-demosaicing", "malvar.cl:malvar", "read N + write 3N", 4 * N, ("b", "y"),
                           lambda d: malvar.forward(d["b"], out=d["y"]),
                           lambda h: demosaicing_CFA_Bayer_Malvar2004(h["b"], PATTERN)))
+    cases += linear4d_cases(runtime, sensor, pitch)
 
     def admm_cases(dims):
         from ..solvers.admm import AdmmSolver, lens_block_inverses
