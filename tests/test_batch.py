@@ -154,10 +154,13 @@ def _group_gone(pgid: int, seconds: float = 20) -> bool:
 
 def test_an_interrupted_batch_resumes(captures, tmp_path):
     out = tmp_path / "out"
-    slow = ["--iterations", "40"]  # long enough that the batch is still busy when the first capture is done
+    slow = ["--iterations", "200"]  # long enough that the batch is still busy when the first capture is done
     code = "import sys; from lfcl.cli import main; sys.argv[0] = 'lfcl'; main()"
+    # cwd: with `-c`, Python puts the working directory first on sys.path, which in a checkout would
+    # import the source tree instead of the installed lfcl
     proc = subprocess.Popen([sys.executable, "-c", code, "batch", str(captures), "-o", str(out), "--workers", "2",
-                             *slow], start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                             *slow], start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            cwd=tmp_path)
     try:
         deadline = time.monotonic() + 120
         while not _complete(out) and proc.poll() is None and time.monotonic() < deadline:
