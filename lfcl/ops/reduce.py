@@ -142,8 +142,19 @@ class Reductions:
     def many(self, *requests) -> list[float]:
         """Several reductions with one wait: ``requests`` are ``(method name, array, ...)``,
         e.g. ``many(("norm2", x), ("dot", x, y))``. Saves a host round trip per reduction."""
-        launched = [self._enqueue(i, f"{name}_partials", *arrays) for i, (name, *arrays) in enumerate(requests)]
+        launched = [self.enqueue(i, *request) for i, request in enumerate(requests)]
         self.runtime.queue.finish()
+        return self.collect(launched)
+
+    def enqueue(self, index: int, name: str, *arrays) -> bool:
+        """Start reduction ``name`` ("dot", "norm2", ...) into slot ``index`` without waiting,
+        so that a caller can share one wait with its own transfers; :meth:`collect` after
+        the queue has finished. False for an empty array (its result is 0)."""
+        return self._enqueue(index, f"{name}_partials", *arrays)
+
+    def collect(self, launched) -> list[float]:
+        """The results of the slots started by :meth:`enqueue` (``launched``: its return values,
+        slot by slot from 0); the queue must have finished."""
         return [math.fsum(self._slots[i][0].tolist()) if ok else 0.0 for i, ok in enumerate(launched)]
 
     def _reduce(self, kernel: str, *arrays) -> float:

@@ -46,6 +46,7 @@ import functools
 import math
 
 import numpy as np
+import pyopencl as cl
 import scipy.ndimage
 
 from ..device import grid_defines
@@ -157,12 +158,22 @@ def lens_block_inverses(pattern: str, origin, pitch, rho: float, lens_weights: t
     return blocks
 
 
+def weight_runs_np(lens_weights: np.ndarray) -> np.ndarray:
+    """The lens weights [U, V] as the admm kernels read them (admm.cl row_weights): for every
+    lens row u and column phase p, the weights of the 16 columns from p on,
+    ``runs[u, p, k] = w[u, (p + k) % V]``, float32 [U * V * 16]."""
+    weights = np.asarray(lens_weights, dtype=np.float32)
+    V = weights.shape[1]
+    columns = (np.arange(V)[:, None] + np.arange(16)[None, :]) % V
+    return np.ascontiguousarray(weights[:, columns].reshape(-1))
+
+
 def solver_bytes(sensor_shape, dims, exact: bool, cross_channel: bool = False) -> int:
     """Device memory an AdmmSolver.solve needs, with its Malvar start and mosaic (bytes)."""
     H, W = (int(n) for n in sensor_shape)
     planes = 3 * H * W
     k = len(ordered_dims(dims))
-    floats = (5 if exact else 9) * planes + 4 * k * planes + 2 * H * W  # planes, CG, z/u/Dx/dz, b and A x
+    floats = (5 if exact else 9) * planes + 3 * k * planes + 2 * H * W  # planes, CG, z/u/dz, b and the sums
     if cross_channel:
         floats += 4 * k * 2 * H * W  # z/u/Dx/dz of the cross-channel block
     return 4 * floats
@@ -199,6 +210,7 @@ class AdmmSolver:
         self._unit_weights = tuple([1.0] * (self.U * self.V))
         self._weights_key = self._unit_weights
         self._weights = runtime.to_device(np.ones(self.U * self.V, np.float32))
+        self._weight_runs = runtime.to_device(weight_runs_np(np.ones((self.U, self.V), np.float32)))
         self._normal_args = (np.int32(self.height), np.int32(self.width), packed_pattern(pattern, origin))
         self._grid_defines = grid_defines(pitch, dims_mask(self.dims))
         self._cross_channel = False  # K = [D; D C]: set per solve from params.lam_xc
@@ -207,10 +219,15 @@ class AdmmSolver:
         planes = [runtime.empty(self.planes_shape) for _ in range(3)]
         self._x_prev, self._rhs, self._tmp = planes
         self._cg_buffers = None  # r, P r, p, q: only the CG x-update needs them
-        grads = [runtime.empty(self.D.gradient_shape) for _ in range(4)]
-        self._z, self._u, self._dx, self._dz = grads
+        grads = [runtime.empty(self.D.gradient_shape) for _ in range(3)]
+        self._z, self._u, self._dz = grads  # D x is computed where it is used (zu_step)
         self._cross_buffers = None  # zc, uc, D C x, dzc: only the cross-channel prior needs them
-        self._mosaic = runtime.empty((self.height, self.width))
+        # the history's per-row sums (admm.cl zu_step, dual_and_misfit) and per-work-item
+        # squared updates of lens_solve, fetched in one copy per iteration
+        self._rows = 3 * self.height
+        self._lens_grid = (2 * -(-(self.width // self.V) // 4), self.height // self.U, 3)
+        self._sums_host = np.empty(5 * self._rows + int(np.prod(self._lens_grid)), np.float32)
+        self._sums = runtime.empty(self._sums_host.shape)
 
     @property
     def _defines(self) -> tuple:
@@ -261,13 +278,13 @@ class AdmmSolver:
             (z, zc), (u, uc) = z, u
             self.runtime.launch(
                 "admm", "build_rhs_xc", self._row_runs, b.data, z.data, u.data, zc.data, uc.data, out.data,
-                *self._normal_args, np.float32(rho), self._weights.data, self._links.data, x.data, flag,
+                *self._normal_args, np.float32(rho), self._weight_runs.data, self._links.data, x.data, flag,
                 defines=self._defines,
             )
             return out
         self.runtime.launch(
             "admm", "build_rhs", self._row_runs, b.data, z.data, u.data, out.data,
-            *self._normal_args, np.float32(rho), self._weights.data, self._links.data, x.data, flag,
+            *self._normal_args, np.float32(rho), self._weight_runs.data, self._links.data, x.data, flag,
             defines=self._defines,
         )
         return out
@@ -275,9 +292,38 @@ class AdmmSolver:
     def _launch(self, kernel, src, out, rho):
         self.runtime.launch(
             "admm", kernel, self._row_runs, src.data, out.data,
-            *self._normal_args, np.float32(rho), self._weights.data, self._links.data, defines=self._defines,
+            *self._normal_args, np.float32(rho), self._weight_runs.data, self._links.data, defines=self._defines,
         )
         return out
+
+    def zu_step(self, x, kappa):
+        """z <- S_kappa(M D x + u), u <- M D x + u - z, dz <- z_new - z_old, with D x on the fly
+        (admm.cl zu_step); leaves the row sums of the primal residual^2, TV and ||M D x||^2."""
+        self.runtime.launch(
+            "admm", "zu_step", (self.height, 3), x.data, self._z.data, self._u.data, self._dz.data,
+            np.float32(kappa), np.int32(self.height), np.int32(self.width), self._links.data, self._sums.data,
+            defines=self._defines,
+        )
+
+    def dual_and_misfit(self, x, b, accumulate: bool = False):
+        """tmp (+)= D^T M dz, with the row sums of ||tmp||^2 and of the misfit ||W^(1/2) (A x - b)||^2
+        (admm.cl dual_and_misfit)."""
+        self.runtime.launch(
+            "admm", "dual_and_misfit", (self.height, 3), self._dz.data, self._tmp.data, np.int32(bool(accumulate)),
+            x.data, b.data, *self._normal_args, self._weight_runs.data, self._links.data, self._sums.data,
+            defines=self._defines,
+        )
+
+    def _fetch_sums(self, with_change: bool) -> list[float]:
+        """The history's sums from the device partials, each added in float64:
+        (primal^2, TV, ||M D x||^2, dual^2 / rho^2, misfit^2[, change^2]); waits for the queue."""
+        cl.enqueue_copy(self.runtime.queue, self._sums_host, self._sums.data, is_blocking=False)
+        self.runtime.queue.finish()
+        rows, host = self._rows, self._sums_host
+        sums = [float(np.sum(host[k * rows:(k + 1) * rows], dtype=np.float64)) for k in range(5)]
+        if with_change:
+            sums.append(float(np.sum(host[5 * rows:], dtype=np.float64)))
+        return sums
 
     def _every_lens_sees_every_colour(self) -> bool:
         """lens_components_measure_every_colour for this solver's weights and mask."""
@@ -308,9 +354,10 @@ class AdmmSolver:
             padded[..., :UV] = blocks.transpose(0, 1, 3, 2)
             self._inverse = (key, self.runtime.to_device(padded))
         self.runtime.launch(
-            "admm", "lens_solve", (2 * -(-(self.width // self.V) // 4), self.height // self.U, 3),
+            "admm", "lens_solve", self._lens_grid,
             rhs.data, x.data, self._inverse[1].data, np.int32(self.height), np.int32(self.width),
-            self._weights.data, np.int32(bool(accumulate)), defines=self._defines,
+            self._weight_runs.data, np.int32(bool(accumulate)), self._sums.data, np.int32(5 * self._rows),
+            defines=self._defines,
         )
 
     def _conjugate_gradient(self, x, rhs, rho, max_steps, tol) -> int:
@@ -356,6 +403,7 @@ class AdmmSolver:
         if key != self._weights_key:  # a blocking upload: only when the weights change
             self._weights_key = key
             self._weights.set(weights.ravel())
+            self._weight_runs.set(weight_runs_np(weights))
 
     def solve(self, b, x0, params: AdmmParams, callback=None, lens_weights=None) -> AdmmResult:
         """Run ADMM on mosaic ``b`` [H, W] from ``x0`` [3, H, W] (both float32 device arrays).
@@ -385,7 +433,8 @@ class AdmmSolver:
             n_z += zc.size
         history: list[IterationRecord] = []
         while True:
-            vec.copy(x, self._x_prev)
+            if not exact:  # the lens solve sums its own updates
+                vec.copy(x, self._x_prev)
             z_blocks, u_blocks = ((self._z, zc), (self._u, uc)) if cross else (self._z, self._u)
             # the exact solve adds M^-1 (rhs - M x): float32 round-off then scales with the update
             self.right_hand_side(b, z_blocks, u_blocks, self._rhs, rho, residual_of=x if exact else None)
@@ -394,23 +443,22 @@ class AdmmSolver:
                 steps = 0
             else:
                 steps = self._conjugate_gradient(x, self._rhs, rho, params.cg_steps, params.cg_tol)
-            D.forward(x, out=self._dx)
-            self.shrink.zu_update(self._dx, self._z, self._u, self._dz, params.kappa)
-            D.adjoint(self._dz, out=self._tmp)
+            self.zu_step(x, params.kappa)  # D x, z, u, dz and their sums in one pass
             if cross:
                 DC.forward(x, out=dxc)
                 self.shrink.zu_update(dxc, zc, uc, dzc, params.kappa_xc)
-                DC.adjoint(dzc, out=self._tmp, accumulate=True)  # K^T (z - z_prev)
-            self.runtime.launch(  # W^(1/2) (A x - b)
-                "admm", "weighted_residual", self._row_runs[:2], x.data, b.data, self._mosaic.data,
-                *self._normal_args, self._weights.data, defines=self._defines,
-            )
-            # the whole history in one round trip to the host
-            requests = [("diff_norm2", self._dx, self._z), ("norm2", self._tmp), ("norm2", self._mosaic),
-                        ("abs_sum", self._dx), ("diff_norm2", x, self._x_prev)]
+                DC.adjoint(dzc, out=self._tmp)  # (D C)^T (z - z_prev), D^T's share added next
+            self.dual_and_misfit(x, b, accumulate=cross)  # K^T (z - z_prev) and A x - b, summed
+            # the whole history in one round trip to the host: the kernels' partials, and the
+            # reductions of the cross-channel block and of the CG x-update's change
+            requests = [] if exact else [("diff_norm2", x, self._x_prev)]
             if cross:
                 requests += [("diff_norm2", dxc, zc), ("abs_sum", dxc)]
-            primal2, dual2, misfit2, tv, change2, *cross_sums = red.many(*requests)
+            enqueued = [red.enqueue(i, *request) for i, request in enumerate(requests)]
+            primal2, tv, kx2, dual2, misfit2, *change = self._fetch_sums(with_change=exact)
+            extra = red.collect(enqueued)
+            change2 = change[0] if exact else extra.pop(0)
+            cross_sums = extra
             prior = lam * tv
             if cross:
                 primal2 += cross_sums[0]
@@ -428,7 +476,7 @@ class AdmmSolver:
                 callback(record, x)
             primal_scale = dual_scale = 0.0
             if params.abs_tol > 0 or params.rel_tol > 0:
-                kx2, z2 = red.norm2(self._dx), red.norm2(self._z)
+                z2 = red.norm2(self._z)
                 D.adjoint(self._u, out=self._tmp)
                 if cross:
                     kx2, z2 = kx2 + red.norm2(dxc), z2 + red.norm2(zc)
