@@ -243,7 +243,7 @@ def test_cal_json_round_trip(tmp_path, calibration):
     assert data["grid"]["packing"] == "square"
     np.testing.assert_allclose(loaded.weight.local, calibration.weight.local, atol=1e-4)
     w = loaded.weight_map()
-    assert w.shape == (300, 320) and 0 <= w.min() and w.max() <= 1.0001
+    assert w.shape == (300, 320) and w.min() >= 0 and w.max() <= 1.0001
     assert 0.3 < loaded.valid_mask().mean() < 1.0  # dark corners between the discs are not valid
 
 
@@ -326,7 +326,7 @@ def test_cli_simulate_and_calibrate_hex(tmp_path, cli):
 
     dist, _ = cKDTree(np.c_[rows, cols]).query(centres)
     assert np.sqrt(np.mean(dist**2)) <= 0.05
-    assert 0 <= centres[:, 0].min() and centres[:, 0].max() <= shape[0] - 1
+    assert centres[:, 0].min() >= 0 and centres[:, 0].max() <= shape[0] - 1
 
 
 def test_cli_pitch_without_white(tmp_path, cli):

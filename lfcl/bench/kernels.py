@@ -25,7 +25,7 @@ kernels of ``kernels/admm.cl`` are launched as ``AdmmSolver`` launches them;
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import pyopencl as cl
@@ -78,7 +78,7 @@ class _Pool:
 
     def ensure(self, keys, want_host: bool):
         for key in keys:
-            shape, low, high = self.specs[key]
+            shape, low, _ = self.specs[key]
             if key not in self.device:
                 if low is None:
                     self.device[key] = self.runtime.empty(shape)
@@ -269,7 +269,7 @@ def _check_memory(runtime, specs: dict, cases: list[Case], size) -> None:
     nbytes = {k: int(np.prod(shape)) * FLOAT for k, (shape, _, _) in specs.items()}
     largest_key = max(nbytes, key=nbytes.get)
     peak = 0
-    for i, case in enumerate(cases):  # live buffers: used by this case or a later one, and already made
+    for i in range(len(cases)):  # live buffers: used by this case or a later one, and already made
         made = {k for c in cases[: i + 1] for k in c.buffers}
         later = {k for c in cases[i:] for k in c.buffers}
         peak = max(peak, sum(nbytes[k] for k in made & later))

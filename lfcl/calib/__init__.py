@@ -12,12 +12,7 @@ Example::
     >>> i, j, rows, cols = grid.centres((600, 600))
 """
 
-from .estimate import (
-    CalibrationError,
-    calibrate_array,
-    calibrate_white,
-    calibration_from_pitch,
-)
+from .estimate import CalibrationError, calibrate_array, calibrate_white, calibration_from_pitch
 from .grid import PACKINGS, LensGrid
 from .io import (
     calibration_from_dict,

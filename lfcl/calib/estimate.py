@@ -236,7 +236,7 @@ def coarse_lattice(norm_crop: np.ndarray, crop_origin, packing: str, pitch_hint:
 
 def _sample_axes(H: int, W: int, pitch: float, max_pixels: int):
     """Row and column indices of the pixels used by the refinement (all, or an even grid of tiles)."""
-    if H * W <= max_pixels:
+    if max_pixels >= H * W:
         return np.arange(H), np.arange(W)
     side = math.sqrt(max_pixels * H / W), math.sqrt(max_pixels * W / H)
     axes = []

@@ -252,7 +252,7 @@ class LensGrid:
     def from_dict(cls, data: dict) -> LensGrid:
         """From :meth:`as_dict` output: ``origin``/``row_step``/``col_step`` define the grid."""
         if not isinstance(data, dict):
-            raise ValueError("the grid must be an object")  # noqa: TRY004 (a malformed file: a user error)
+            raise ValueError("the grid must be an object")
         missing = [k for k in ("packing", "origin", "row_step", "col_step") if k not in data]
         if missing:
             raise ValueError(f"the grid lacks {', '.join(missing)}")

@@ -110,7 +110,7 @@ class WeightModel:
     @classmethod
     def from_dict(cls, data: dict) -> WeightModel:
         if not isinstance(data, dict):
-            raise ValueError("the weight model must be an object or null")  # noqa: TRY004 (a user error)
+            raise ValueError("the weight model must be an object or null")
         try:
             local, glob = data["local"], data["global"]
             return cls(step_px=float(local["step_px"]), colours=tuple(str(c) for c in data["colours"]),

@@ -53,12 +53,7 @@ def _parse_offset(value: str) -> tuple[float, float]:
 @user_errors
 def command(white, output, export_centers, packing, pitch, sensor_shape, rotation, offset, pattern):
     """Estimate the lenslet grid (and per-pixel weights) from a WHITE image, or write one from --pitch."""
-    from ..calib import (
-        calibrate_white,
-        calibration_from_pitch,
-        save_calibration,
-        write_centres_csv,
-    )
+    from ..calib import calibrate_white, calibration_from_pitch, save_calibration, write_centres_csv
     from ..calib.grid import check_packing
 
     start = time.perf_counter()

@@ -32,6 +32,6 @@ from .scenes import SCENES, render_scene, scene_planes
 from .sensor import SensorModel
 
 __all__ = [
-    "Capture", "LensletGeometry", "Plane", "SCENES", "SensorModel", "load_lightfield", "parse_exposure",
+    "SCENES", "Capture", "LensletGeometry", "Plane", "SensorModel", "load_lightfield", "parse_exposure",
     "parse_lenses", "render_planes", "render_scene", "scene_planes", "simulate", "write_capture",
 ]
