@@ -167,7 +167,10 @@ def load_calibration(path, sensor_shape=None, pattern: str | None = None) -> Cal
         raise ValueError(f"{path}: not valid JSON ({' '.join(str(exc).split())})") from None
     cal = calibration_from_dict(data, str(path))
     if sensor_shape is not None:
-        cal.check(sensor_shape, pattern)
+        try:
+            cal.check(sensor_shape, pattern)
+        except ValueError as exc:  # name the file: the user may hold calibrations of several cameras
+            raise ValueError(f"{path}: {exc}") from None
     return cal
 
 
