@@ -228,6 +228,28 @@ def simulate(scene: str = "charts", lenses=None, pitch: int | None = None, patte
         "lenses": list(geometry.lenses),
         "grid": geometry.grid,
         "offset": list(geometry.offset),
+        **_exposure_meta(sensor, lux, lux_per_unit, mean_y, peak_y, mean_normalised, (s_coef, o_coef)),
+        "vignetting": {"enabled": bool(vignetting), "model": "cos^4, microlens f-number", "f_number": f_number,
+                       "uv_factors": geometry.vignetting(f_number).tolist() if vignetting else None},
+        "white": {"file": "white.dng", "level_normalised": WHITE_FRACTION},
+        "truth": {
+            "file": "truth.npy", "shape": list(truth.shape), "dtype": "float32",
+            "layout": "[S, T, U, V, 3] linear camera RGB",
+            "scale": "expected electrons / full-well electrons = (raw - black) / (white - black), clipped at 1.0",
+            "noise_free": True, "vignetting": False,
+        },
+        "truth_views": {"file": "truth_views.exr",
+                        "layout": "U x V grid of S x T tiles; tile (u, v) is the view (u, v)"},
+        "supersample": supersample,
+        "files": list(FILES),
+    }
+    return Capture(raw, white, truth, meta, geometry, sensor, pattern)
+
+
+def _exposure_meta(sensor, lux, lux_per_unit, mean_y, peak_y, mean_normalised, profile) -> dict:
+    """The sensor, exposure and noise entries of a capture's meta.json (docs/simulator.md)."""
+    s_coef, o_coef = profile
+    return {
         "sensor": sensor.as_meta(),
         "black_level": int(sensor.black_level_dn),
         "white_level": int(sensor.white_level_dn),
@@ -248,21 +270,7 @@ def simulate(scene: str = "charts", lenses=None, pitch: int | None = None, patte
             "sigma_at_1_lux": float(sensor.noise_sigma(sensor.lux_to_normalised(1.0))),
             "sigma_floor": float(np.sqrt(o_coef)),
         },
-        "vignetting": {"enabled": bool(vignetting), "model": "cos^4, microlens f-number", "f_number": f_number,
-                       "uv_factors": geometry.vignetting(f_number).tolist() if vignetting else None},
-        "white": {"file": "white.dng", "level_normalised": WHITE_FRACTION},
-        "truth": {
-            "file": "truth.npy", "shape": list(truth.shape), "dtype": "float32",
-            "layout": "[S, T, U, V, 3] linear camera RGB",
-            "scale": "expected electrons / full-well electrons = (raw - black) / (white - black), clipped at 1.0",
-            "noise_free": True, "vignetting": False,
-        },
-        "truth_views": {"file": "truth_views.exr",
-                        "layout": "U x V grid of S x T tiles; tile (u, v) is the view (u, v)"},
-        "supersample": supersample,
-        "files": list(FILES),
     }
-    return Capture(raw, white, truth, meta, geometry, sensor, pattern)
 
 
 def _write_folder(directory, files, write) -> Path:
@@ -566,26 +574,7 @@ def simulate_grid(scene: str = "charts", grid: str = "square", pitch: float = 9.
         "views": [U, V],
         "lightfield": {**light_field, "scene_frame": list(frame), "scene_position": (
             "(s sqrt(3)/2 + 1/2, t + 1/2 + (s mod 2)/2) lenses (hex); (s + 1/2, t + 1/2) (square)")},
-        "sensor": sensor.as_meta(),
-        "black_level": int(sensor.black_level_dn),
-        "white_level": int(sensor.white_level_dn),
-        "electrons_per_lux": sensor.electrons_per_lux,
-        "exposure": {
-            "lux_per_scene_unit": lux_per_unit,
-            "mean_luminance_scene_units": mean_y,
-            "peak_lux": peak_y * lux_per_unit,
-            "mean_electrons": lux * sensor.electrons_per_lux,
-            "mean_normalised": mean_normalised,
-            "luminance_weights": LUMINANCE.tolist(),
-        },
-        "noise": {
-            "profile": [[s_coef, o_coef]] * 3,
-            "variance": "S * x + O in normalised units x = (raw - black) / (white - black)",
-            "sigma": float(sensor.noise_sigma(mean_normalised)),
-            "sigma_at_mean": float(sensor.noise_sigma(mean_normalised)),
-            "sigma_at_1_lux": float(sensor.noise_sigma(sensor.lux_to_normalised(1.0))),
-            "sigma_floor": float(np.sqrt(o_coef)),
-        },
+        **_exposure_meta(sensor, lux, lux_per_unit, mean_y, peak_y, mean_normalised, (s_coef, o_coef)),
         "vignetting": {"enabled": bool(vignetting), "model": "cos^4, microlens f-number", "f_number": f_number,
                        "micro_image": "disc of diameter fill * pitch in raw and white (lenslet.micro_image)"},
         "white": {"file": "white.dng", "level_normalised": WHITE_FRACTION},
