@@ -13,14 +13,13 @@ noise per raw pixel at the mean level of the measured pixels, normalised units.
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
 import scipy.stats
 
 from .layout import channel_map
-from .noise import QUANTILE, NoiseEstimate
+from .noise import QUANTILE, NoiseEstimate, fit_noise_model
 
 MIN_RESPONSE = 0.8
 MIN_SAMPLES = 6  # per lens and colour: 3 parameters and at least 3 degrees of freedom
@@ -59,19 +58,6 @@ def estimate_grid_noise(mosaic: np.ndarray, sampling, bins: int = 16, min_respon
     if means.size < 8:
         raise ValueError(f"too few well-lit micro-images ({means.size} lens colours with >= {MIN_SAMPLES} pixels "
                          f"of response >= {min_response}) to estimate the noise")
-    edges = np.unique(np.quantile(means, np.linspace(0, 1, bins + 1)))
-    centres, levels = [], []
-    for lo, hi in itertools.pairwise(edges):
-        inside = (means >= lo) & (means <= hi)
-        if inside.sum() >= 8:
-            centres.append(np.median(means[inside]))
-            levels.append(np.quantile(variances[inside], QUANTILE))
-    if len(centres) >= 2:
-        gain, floor = np.polyfit(centres, levels, 1)
-    else:
-        gain, floor = 0.0, float(np.quantile(variances, QUANTILE))
-    gain, floor = max(float(gain), 0.0), max(float(floor), 0.0)
-    if gain == 0.0 and floor == 0.0:
-        floor = float(np.quantile(variances, QUANTILE))
+    gain, floor = fit_noise_model(means, variances, bins)
     level = float(np.mean(mosaic.ravel()[sampling.measured_pixels()]))
     return NoiseEstimate(gain, floor, math.sqrt(max(gain * level + floor, 0.0)), "raw")

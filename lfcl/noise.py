@@ -96,22 +96,33 @@ def estimate_noise(mosaic: np.ndarray, pattern: str, pitch, origin=(0, 0), bins:
     variances = np.concatenate(variances)
     keep = np.isfinite(means) & np.isfinite(variances)
     means, variances = means[keep], variances[keep]
+    gain, floor = fit_noise_model(means, variances, bins)
+    level = float(np.mean(mosaic))
+    return NoiseEstimate(gain, floor, math.sqrt(max(gain * level + floor, 0.0)), "raw")
+
+
+def fit_noise_model(means: np.ndarray, variances: np.ndarray, bins: int) -> tuple[float, float]:
+    """(gain, floor) of var = gain * mean + floor, fitted to per-lens (mean, residual variance) pairs.
+
+    The pairs are binned by brightness (quantile bins with at least 8 members) and each
+    bin keeps a low quantile of its variances: textured lenses inflate the variance, flat
+    ones do not. Both coefficients are clipped at 0.
+    """
     edges = np.unique(np.quantile(means, np.linspace(0, 1, bins + 1)))
-    centres, medians = [], []
+    centres, levels = [], []
     for lo, hi in itertools.pairwise(edges):
         inside = (means >= lo) & (means <= hi)
         if inside.sum() >= 8:
             centres.append(np.median(means[inside]))
-            medians.append(np.quantile(variances[inside], QUANTILE))
+            levels.append(np.quantile(variances[inside], QUANTILE))
     if len(centres) >= 2:
-        gain, floor = np.polyfit(centres, medians, 1)
+        gain, floor = np.polyfit(centres, levels, 1)
     else:
         gain, floor = 0.0, float(np.quantile(variances, QUANTILE))
     gain, floor = max(float(gain), 0.0), max(float(floor), 0.0)
     if gain == 0.0 and floor == 0.0:
         floor = float(np.quantile(variances, QUANTILE))
-    level = float(np.mean(mosaic))
-    return NoiseEstimate(gain, floor, math.sqrt(max(gain * level + floor, 0.0)), "raw")
+    return gain, floor
 
 
 def from_noise_profile(profile, mosaic: np.ndarray) -> NoiseEstimate:
