@@ -59,6 +59,7 @@ from ..ops.lensfill import LensFill
 from ..ops.linalg import VectorOps
 from ..ops.reduce import Reductions
 from ..ops.shrink import Shrinkage
+from .cg import preconditioned_cg
 from .params import AdmmParams, AdmmResult, IterationRecord, stop_reason
 
 
@@ -362,29 +363,11 @@ class AdmmSolver:
 
     def _conjugate_gradient(self, x, rhs, rho, max_steps, tol) -> int:
         """Warm-started PCG on x in place; returns the steps taken."""
-        vec, red = self.vectors, self.reduce
         if self._cg_buffers is None:
             self._cg_buffers = [self.runtime.empty(self.planes_shape) for _ in range(4)]
-        r, pz, p, q = self._cg_buffers
-        self.normal(x, q, rho)
-        vec.axpby(1.0, rhs, -1.0, q, r)  # r = rhs - M x
-        self.precondition(r, pz, rho)
-        vec.copy(pz, p)
-        # one host round trip per reduction point: (r.Pr, |r|^2) together, |rhs|^2 with them
-        rz, r2, rhs2 = red.many(("dot", r, pz), ("norm2", r), ("norm2", rhs))
-        threshold2 = tol * tol * rhs2
-        for step in range(max_steps):
-            if r2 <= threshold2 or rz == 0:
-                return step
-            self.normal(p, q, rho)
-            alpha = rz / red.dot(p, q)
-            vec.axpby(1.0, x, alpha, p, x)
-            vec.axpby(1.0, r, -alpha, q, r)
-            self.precondition(r, pz, rho)
-            rz_next, r2 = red.many(("dot", r, pz), ("norm2", r))
-            vec.axpby(1.0, pz, rz_next / rz, p, p)
-            rz = rz_next
-        return max_steps
+        return preconditioned_cg(self.vectors, self.reduce, lambda src, out: self.normal(src, out, rho),
+                                 lambda src, out: self.precondition(src, out, rho), x, rhs, self._cg_buffers,
+                                 max_steps, tol)
 
     def set_lens_weights(self, lens_weights=None):
         """Data-term weights of the U x V pixels of every lens (None: all ones).

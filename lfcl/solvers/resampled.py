@@ -50,6 +50,7 @@ from ..ops.linalg import VectorOps
 from ..ops.reduce import Reductions
 from ..ops.resample import SparseOperator, multiply
 from ..ops.shrink import Shrinkage
+from .cg import preconditioned_cg
 from .params import AdmmParams, AdmmResult, IterationRecord, stop_reason
 from .reference import neighbour_count
 
@@ -131,27 +132,9 @@ class ResampledAdmmSolver:
         multiply(self.runtime, r, self._inverse_diagonal, out=out)
 
     def _conjugate_gradient(self, x, rhs, rho, max_steps, tol) -> int:
-        """Warm-started Jacobi-PCG on x in place (as lfcl/solvers/admm.py); returns the steps taken."""
-        vec, red = self.vectors, self.reduce
-        r, pz, p, q = self._cg
-        self.normal(x, q, rho)
-        vec.axpby(1.0, rhs, -1.0, q, r)
-        self._precondition(r, pz)
-        vec.copy(pz, p)
-        rz, r2, rhs2 = red.many(("dot", r, pz), ("norm2", r), ("norm2", rhs))
-        threshold2 = tol * tol * rhs2
-        for step in range(max_steps):
-            if r2 <= threshold2 or rz == 0:
-                return step
-            self.normal(p, q, rho)
-            alpha = rz / red.dot(p, q)
-            vec.axpby(1.0, x, alpha, p, x)
-            vec.axpby(1.0, r, -alpha, q, r)
-            self._precondition(r, pz)
-            rz_next, r2 = red.many(("dot", r, pz), ("norm2", r))
-            vec.axpby(1.0, pz, rz_next / rz, p, p)
-            rz = rz_next
-        return max_steps
+        """Warm-started Jacobi-PCG on x in place (lfcl/solvers/cg.py); returns the steps taken."""
+        return preconditioned_cg(self.vectors, self.reduce, lambda src, out: self.normal(src, out, rho),
+                                 self._precondition, x, rhs, self._cg, max_steps, tol)
 
     def solve(self, b, weights, x0, params: AdmmParams, callback=None) -> AdmmResult:
         """ADMM from ``x0`` [3, S*U, T*V] for the measurements ``b`` and ``weights`` [n_pixels] (device arrays).
