@@ -92,8 +92,10 @@ __kernel void jacobi_apply(__global const float *r, __global float *z,
     const int16 cols = lane_columns(col0);
     float16 diagonal = select((float16)0.0f, row_weights(weight_runs, row, cols), measured_lanes(row, cols, pattern, c));
     const float link = CROSS_CHANNEL ? rho * (c == 1 ? 3.0f : 2.0f) : rho;
+    #pragma unroll
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(DIMS & d)) continue;
+        #pragma unroll
         for (int dir = -1; dir <= 1; dir += 2)
             diagonal += select((float16)0.0f, (float16)link, LINK(d, dir, row, cols, height, width));
     }
@@ -112,6 +114,7 @@ inline float16 divergence_of_difference(__global const float *z, __global const 
     const int16 cols = lane_columns(col0);
     float16 divergence = (float16)0.0f;
     int block = 0;
+    #pragma unroll
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(DIMS & d)) continue;
         const size_t at = (block * channels + ch) * plane_size;
@@ -315,6 +318,7 @@ __kernel void zu_step(__global const float *x, __global float *z, __global float
         const int16 cols = lane_columns(col0);
         const float16 xi = load_row(plane + start, col0, 0, width);
         int block = 0;
+        #pragma unroll
         for (int d = 1; d <= DIM_T; d <<= 1) {
             if (!(DIMS & d)) continue;
             const float16 next = neighbour(plane, d, +1, row, col0, height, width);
@@ -358,6 +362,7 @@ __kernel void dual_and_misfit(__global const float *dz, __global float *out, con
         const int16 cols = lane_columns(col0);
         float16 acc = (float16)0.0f;
         int block = 0;
+        #pragma unroll
         for (int d = 1; d <= DIM_T; d <<= 1) {
             if (!(DIMS & d)) continue;
             __global const float *zd = dz + (block * 3 + c) * plane_size;

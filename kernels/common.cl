@@ -25,6 +25,8 @@ inline int bayer_colour(int row, int col, int pattern)
 // (columns col0 .. col0+15, one SIMD register on a CPU): a step along u or s moves
 // to another row, a step along v or t stays in the row, and "is there a neighbour"
 // is one lane mask per dim.
+// Loops over the dims (and directions) carry `#pragma unroll`: with d and dir constant the
+// switches in has_neighbour() and neighbour() fold away (D uv ran 46 -> 24 ms at 4500x4500).
 
 // row[col0 + offset + k] for k = 0..15, zero where the column is outside [0, width).
 inline float16 load_row(__global const float *row, int col0, int offset, int width)
@@ -96,8 +98,10 @@ inline float16 laplacian(__global const float *plane, float16 xi, int row, int c
 {
     const int16 cols = lane_columns(col0);
     float16 acc = (float16)0.0f;
+    #pragma unroll
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(DIMS & d)) continue;
+        #pragma unroll
         for (int dir = -1; dir <= 1; dir += 2) {
             const float16 other = neighbour(plane, d, dir, row, col0, height, width);
             acc += select((float16)0.0f, xi - other, has_neighbour(d, dir, row, cols, height, width));
@@ -125,8 +129,10 @@ inline float16 linked_laplacian(__global const float *links, __global const floa
 {
     const int16 cols = lane_columns(col0);
     float16 acc = (float16)0.0f;
+    #pragma unroll
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(DIMS & d)) continue;
+        #pragma unroll
         for (int dir = -1; dir <= 1; dir += 2) {
             const float16 other = neighbour(plane, d, dir, row, col0, height, width);
             acc += select((float16)0.0f, xi - other, linked(links, d, dir, row, cols, height, width));

@@ -36,6 +36,7 @@ __kernel void xc_forward(__global const float *x, __global float *z, const int h
     const size_t start = (size_t)row * width;
     const float16 own = load_row(colour + start, col0, 0, width) - load_row(green + start, col0, 0, width);
     int block = 0;
+    #pragma unroll
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(DIMS & d)) continue;
         const float16 next = neighbour(colour, d, +1, row, col0, height, width)
@@ -57,6 +58,7 @@ __kernel void xc_adjoint(__global const float *z, __global float *x, const int h
     const int16 cols = lane_columns(col0);
     float16 acc = (float16)0.0f;
     int block = 0;
+    #pragma unroll
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(DIMS & d)) continue;
         __global const float *zd = z + block * 2 * plane_size;

@@ -26,6 +26,7 @@ __kernel void grad_forward(__global const float *x, __global float *z,
     const int16 cols = lane_columns(col0);
     const float16 xi = load_row(plane + (size_t)row * width, col0, 0, width);
     int block = 0;
+    #pragma unroll
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(DIMS & d)) continue;
         const float16 next = neighbour(plane, d, +1, row, col0, height, width);
@@ -45,6 +46,7 @@ __kernel void grad_adjoint(__global const float *z, __global float *x,
     const int16 cols = lane_columns(col0);
     float16 acc = (float16)0.0f;
     int block = 0;
+    #pragma unroll
     for (int d = 1; d <= DIM_T; d <<= 1) {
         if (!(DIMS & d)) continue;
         __global const float *zd = z + (block * channels + c) * plane_size;
