@@ -1,0 +1,98 @@
+"""Copy whole lenses from one lens grid to another (gather and scatter of lens sets).
+
+Arrays are stacks of sensor-shaped planes, ``[..., S*U, T*V]`` (docs/layout.md): the
+colour planes, the gradient blocks ``[k, C, H, W]`` or a mosaic ``[H, W]``. A pair
+``(i, j)`` copies lens ``i = s * T + t`` of the source to lens ``j`` of the destination,
+in every plane; a pair ``(-1, j)`` sets lens ``j`` to zero; lenses no pair names keep their
+values. lfcl/solvers/freeze.py uses it
+to move the lenses still being solved into a smaller solver and back.
+
+Example::
+
+    >>> import numpy as np
+    >>> from lfcl.ops.lenscopy import copy_lenses_np
+    >>> src = np.arange(2 * 4, dtype=np.float32).reshape(2, 4)  # 1x2 lenses of 2x2 pixels
+    >>> copy_lenses_np(src, np.zeros((2, 2), np.float32), [(1, 0)], (2, 2))
+    array([[2., 3.],
+           [6., 7.]], dtype=float32)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..device import grid_defines
+from . import check_device_array
+
+
+def lens_pairs(pairs) -> np.ndarray:
+    """``pairs`` as an int32 [n, 2] array (source lens or -1 for zeros, destination lens)."""
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    if pairs.size and (pairs[:, 0].min() < -1 or pairs[:, 1].min() < 0):
+        raise ValueError("lens indices must be >= 0 (a source of -1: zeros)")
+    return pairs.astype(np.int32)
+
+
+def _lens_view(array: np.ndarray, pitch) -> np.ndarray:
+    """``[..., S*U, T*V]`` as ``[P, S, U, T, V]`` (a view when ``array`` is contiguous)."""
+    U, V = pitch
+    H, W = array.shape[-2:]
+    if H % U or W % V:
+        raise ValueError(f"planes {H}x{W} are not a whole number of {U}x{V} lenses")
+    return array.reshape(-1, H // U, U, W // V, V)
+
+
+def copy_lenses_np(src: np.ndarray, dst: np.ndarray, pairs, pitch) -> np.ndarray:
+    """A copy of ``dst`` with lens ``j`` of every plane replaced by lens ``i`` of ``src`` (zeros for
+    ``i = -1``), (i, j) in ``pairs``."""
+    pairs = lens_pairs(pairs)
+    source, out = _lens_view(np.asarray(src), pitch), np.array(dst, copy=True)
+    target = _lens_view(out, pitch)
+    if source.shape[0] != target.shape[0]:
+        raise ValueError(f"src and dst must hold as many planes: {source.shape[0]} and {target.shape[0]}")
+    for name, grid, column in (("source", source, 0), ("destination", target, 1)):
+        if pairs.size and pairs[:, column].max() >= grid.shape[1] * grid.shape[3]:
+            raise ValueError(f"a {name} lens index is past the {grid.shape[1]}x{grid.shape[3]} lenses")
+    lenses_s, lenses_t = source.shape[3], target.shape[3]
+    for i, j in pairs:
+        target[:, j // lenses_t, :, j % lenses_t] = 0 if i < 0 else source[:, i // lenses_s, :, i % lenses_s]
+    return out
+
+
+class LensCopy:
+    """copy_lenses_np on the device (kernels/lenscopy.cl), for lenses of one pitch."""
+
+    def __init__(self, runtime, pitch):
+        self.runtime = runtime
+        self.U, self.V = (int(p) for p in pitch)
+
+    def upload(self, pairs):
+        """The pairs as a device table, to reuse for several arrays (``None`` for no pair)."""
+        pairs = lens_pairs(pairs)
+        return self.runtime.to_device(pairs) if pairs.size else None
+
+    def __call__(self, src, dst, pairs):
+        """Copy lens i of ``src`` to lens j of ``dst`` for every (i, j) in ``pairs`` (a list or an
+        :meth:`upload` table; the caller keeps indices inside both grids). Returns ``dst``."""
+        if pairs is None:
+            return dst
+        table = self.upload(pairs) if isinstance(pairs, (list, tuple, np.ndarray)) else pairs
+        if table is None:
+            return dst
+        grids = []
+        for name, array in (("src", src), ("dst", dst)):
+            H, W = array.shape[-2:]
+            check_device_array(array, array.shape, name)
+            if H % self.U or W % self.V:
+                raise ValueError(f"{name}: planes {H}x{W} are not a whole number of {self.U}x{self.V} lenses")
+            grids.append((array.size // (H * W), H // self.U, W // self.V))
+        (planes, src_rows, src_lenses), (dst_planes, dst_rows, dst_lenses) = grids
+        if planes != dst_planes:
+            raise ValueError(f"src and dst must hold as many planes: {planes} and {dst_planes}")
+        count = table.shape[0]
+        self.runtime.launch(
+            "lenscopy", "copy_lenses", (count, planes), src.data, np.int32(src_lenses), np.int32(src_rows),
+            dst.data, np.int32(dst_lenses), np.int32(dst_rows), table.data, np.int32(count),
+            defines=grid_defines((self.U, self.V), 0),
+        )
+        return dst
