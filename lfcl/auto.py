@@ -26,6 +26,10 @@ import math
 from importlib import resources
 
 RULE_FILE = "auto_rule.json"
+#: What ``auto`` runs when the rule names a method that cannot run on the raw at hand (linear4d
+#: on a pitch without coefficients, a method a resampled grid lacks): the method that gained
+#: over malvar on every setting measured (docs/admm.md, docs/geometry.md), at strength 1.
+AUTO_FALLBACK = "admm-uv"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -36,6 +40,7 @@ class AutoChoice:
     strength: float
     sigma: float
     reason: str
+    start: str = "malvar"  # the ADMM methods' first estimate (lfcl.methods.STARTS)
 
     def as_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -51,10 +56,15 @@ def load_rule() -> tuple[dict, ...]:
     return tuple(sorted(bands, key=lambda b: b["sigma_from"]))
 
 
-def parse_candidate(name: str) -> tuple[str, float]:
-    """'admm-uv@2' -> ('admm-uv', 2.0); 'malvar' -> ('malvar', 1.0)."""
+def parse_candidate(name: str) -> tuple[str, float, str]:
+    """'method[@strength][:start]' -> (method, strength, start).
+
+    'admm-uv@2' -> ('admm-uv', 2.0, 'malvar'); 'admm-uv-xc@1:linear4d' -> ('admm-uv-xc', 1.0, 'linear4d');
+    'malvar' -> ('malvar', 1.0, 'malvar').
+    """
+    name, _, start = name.partition(":")
     method, _, strength = name.partition("@")
-    return method, float(strength) if strength else 1.0
+    return method, float(strength) if strength else 1.0, start or "malvar"
 
 
 def band_for(sigma: float, rule=None) -> tuple[dict, str]:
@@ -68,14 +78,27 @@ def band_for(sigma: float, rule=None) -> tuple[dict, str]:
     return bands[-1], "above the trained range; nearest band"
 
 
+def replacement(choice: AutoChoice, why: str, method: str | None = None, strength: float | None = None
+                ) -> tuple[AutoChoice, dict]:
+    """What runs instead of ``choice``, which cannot run here (``why``): ``method`` (default: the
+    choice's) at ``strength`` (default: the choice's) from the Malvar start; and the ``replaced``
+    entry of ``parameters["auto"]`` (lfcl/auto_report.py lists it)."""
+    method = choice.method if method is None else method
+    strength = choice.strength if strength is None else strength
+    at = f" at strength {strength:g}" if strength != 1 else ""
+    ran = AutoChoice(method, strength, choice.sigma, f"{choice.reason}; {why}, so {method}{at} from a Malvar start",
+                     "malvar")
+    return ran, {"method": choice.method, "strength": choice.strength, "start": choice.start, "why": why}
+
+
 def choose(sigma: float, rule=None) -> AutoChoice:
     """The method and strength for noise level ``sigma``."""
     if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma >= 0):
         raise ValueError(f"auto needs a finite noise level >= 0, got {sigma!r}")
     band, where = band_for(sigma, rule)
-    method, strength = parse_candidate(band["candidate"])
+    method, strength, start = parse_candidate(band["candidate"])
     reason = (f"sigma {sigma:.3g} {where} {band['sigma_from']:.3g}-{band['sigma_to']:.3g}: on its "
               f"{band['captures']} training captures {band['candidate']} was the cheapest candidate within "
               f"{band['within_db']:g} dB of the smallest worst-case PSNR loss against the best fixed method "
               f"(its loss: {band['worst_loss_db']:.2f} dB)")
-    return AutoChoice(method, strength, float(sigma), reason)
+    return AutoChoice(method, strength, float(sigma), reason, start)

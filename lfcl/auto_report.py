@@ -29,7 +29,7 @@ def skipped_by_auto(auto: dict | None, rule=None) -> list[dict]:
     replaced = auto.get("replaced")
     if replaced:
         skipped.append({"output": replaced["method"], "stage": "demosaic",
-                        "reason": f"auto's rule names it, but it does not run on resampled lens grids: "
+                        "reason": f"auto's rule names it, but {replaced.get('why', 'it does not run here')}: "
                                   f"{auto['method']} instead"})
         return skipped  # the rule's other candidates were weighed against a method that did not run
     band, _ = band_for(float(auto["sigma"]), rule)

@@ -56,9 +56,12 @@ def load_capture(directory) -> Capture:
 
 
 def run_method(capture: Capture, method: str, device=None, **overrides) -> dict:
-    """Demosaic the capture with ``method``; scores, timings and the light field."""
+    """Demosaic the capture with ``method`` (a name, or ``NAME:START``); scores, timings and the light field."""
     from .noise import from_noise_profile
 
+    label, (method, _, start) = method, method.partition(":")
+    if start:
+        overrides = {**overrides, "start": start}
     noise = None
     if capture.noise_profile is not None and method != "malvar":
         noise = from_noise_profile(capture.noise_profile, capture.mosaic)
@@ -66,7 +69,7 @@ def run_method(capture: Capture, method: str, device=None, **overrides) -> dict:
                                  noise=noise, **overrides)
     lightfield = planes_to_exchange(result.planes, LightFieldShape.from_exchange(capture.truth))
     return {
-        "method": method,
+        "method": label,
         **lightfield_scores(lightfield, capture.truth),
         **lightfield_colour_scores(lightfield, capture.truth),
         "seconds": result.seconds,
@@ -147,10 +150,21 @@ def write_figures(capture: Capture, results: list[dict], out: Path, label: str) 
 
 
 def check_methods(methods) -> list[str]:
+    """Method names, each optionally ``NAME:START`` (an ADMM method from another start, lfcl.methods.STARTS)."""
+    from .methods import ADMM_DEFAULTS, STARTS
+
     methods = [m.strip() for m in methods if m.strip()]
     if not methods:
         raise ValueError(f"no methods given: choose from {', '.join(METHODS)}")
-    return [parse_method(m) for m in methods]
+    checked = []
+    for label in methods:
+        name, _, start = label.partition(":")
+        name = parse_method(name)
+        if start and (start not in STARTS or name not in ADMM_DEFAULTS):
+            raise ValueError(f"{label!r}: a start ({', '.join(STARTS)}) goes with an ADMM method only, as "
+                             f"admm-uv-xc:linear4d")
+        checked.append(f"{name}:{start}" if start else name)
+    return checked
 
 
 def capture_in_memory(meta: dict, lux: float) -> Capture:

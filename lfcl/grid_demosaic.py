@@ -10,7 +10,7 @@ grids of integer pitch, sliced exactly) does not take; docs/geometry.md.
 ``admm-uvst``  fits real sensor samples, never interpolated colours
                (lfcl/solvers/resampled.py). Starts from the malvar result.
 ``auto``       lfcl.auto.choose at the raw's noise level; a method the rule names that
-               does not run here (e.g. linear4d) becomes :data:`AUTO_FALLBACK`.
+               does not run here (e.g. linear4d) becomes ``lfcl.auto.AUTO_FALLBACK``.
 
 Defaults follow lfcl.methods.ADMM_DEFAULTS (lambda per sigma, the stopping rule)
 with the corrections of :data:`GRID_TUNING`, measured on resampled grids
@@ -43,9 +43,6 @@ from .resampling import SamplingModel, sampling_model
 GRID_METHODS = ("malvar", "admm-uv", "admm-st", "admm-uvst")
 #: The method names demosaic_resampled takes: the methods and ``auto``.
 GRID_METHOD_NAMES = ("auto", *GRID_METHODS)
-#: What ``auto`` runs when its rule names a method not in GRID_METHODS: the method that gained
-#: over malvar on every resampled setting measured (docs/geometry.md), at its grid defaults.
-AUTO_FALLBACK = "admm-uv"
 
 # CG steps per ADMM iteration (the aligned admm-uv solves its x-update exactly; here
 # A^T W A differs from lens to lens, so CG it is). See docs/geometry.md for the measurement.
@@ -136,7 +133,7 @@ def demosaic_resampled(mosaic: np.ndarray, pattern: str | None, geometry, method
     ``method="auto"``: :func:`lfcl.auto.choose` at ``noise.sigma_at`` the mean level of
     the measured pixels (the sigma lambda uses), then that method with ``strength``
     times the chosen strength; a method not in :data:`GRID_METHODS` becomes
-    :data:`AUTO_FALLBACK` at strength 1 and the reason says so. The choice goes into
+    ``lfcl.auto.AUTO_FALLBACK`` at strength 1 and the reason says so. The choice goes into
     ``parameters["auto"]`` (``method``, ``strength``, ``sigma``, ``reason``; plus
     ``replaced`` = the rule's own ``{"method", "strength"}`` when it fell back).
 
@@ -204,7 +201,8 @@ def demosaic_resampled(mosaic: np.ndarray, pattern: str | None, geometry, method
     if not np.all(np.isfinite(planes)):
         raise FloatingPointError(f"{method} produced NaN/Inf values; try a smaller lambda or rho")
     history = [dict(dataclasses.asdict(r), band=0) for r in result.history]
-    parameters = {**dataclasses.asdict(params), "sigma": sigma, "interpolation_weight": interpolation_weight}
+    parameters = {**dataclasses.asdict(params), "sigma": sigma, "interpolation_weight": interpolation_weight,
+                  "start": "malvar"}  # the resampled path starts from Malvar (2D), then resampled
     return GridDemosaicResult(planes, method, parameters, result.iterations, time.perf_counter() - start,
                               result.stop_reason, history, noise, planes_to_exchange(planes, shape), sampling)
 
@@ -219,23 +217,22 @@ def _measured(sampling: SamplingModel, mosaic: np.ndarray):
 
 def _auto(mosaic, sampling: SamplingModel, noise, *, strength, **options) -> GridDemosaicResult:
     """``method="auto"`` (see :func:`demosaic_resampled`): choose at the solver's sigma, then run the choice."""
-    from .auto import AutoChoice, choose
+    from .auto import AUTO_FALLBACK, choose, replacement
 
     if noise is None:
         from .grid_noise import estimate_grid_noise
 
         noise = estimate_grid_noise(mosaic, sampling)
     choice = choose(noise.sigma_at(_measured(sampling, mosaic)[1]))
-    ran = choice
-    if choice.method not in GRID_METHODS:
-        ran = AutoChoice(AUTO_FALLBACK, 1.0, choice.sigma,
-                         f"{choice.reason}; {choice.method} does not run on resampled lens grids, so "
-                         f"{AUTO_FALLBACK} at its grid defaults")
+    ran, replaced = choice, None
+    if choice.method not in GRID_METHODS or choice.start != "malvar":
+        what = choice.method if choice.method not in GRID_METHODS else f"{choice.method} from a {choice.start} start"
+        ran, replaced = replacement(choice, f"{what} does not run on resampled lens grids", AUTO_FALLBACK, 1.0)
     result = demosaic_resampled(mosaic, None, sampling, ran.method, strength=strength * ran.strength, noise=noise,
                                 **options)
     auto = ran.as_dict()
-    if ran is not choice:
-        auto["replaced"] = {"method": choice.method, "strength": choice.strength}
+    if replaced:
+        auto["replaced"] = replaced
     result.parameters = {**result.parameters, "auto": auto}
     return result
 

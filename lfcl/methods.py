@@ -35,6 +35,7 @@ from .noise import NoiseEstimate, estimate_noise
 from .ops.malvar import Malvar
 from .ops.reduce import Reductions
 from .solvers.admm import AdmmSolver, solver_bytes, solver_largest_buffer
+from .solvers.freeze import FreezeSettings, combine_reports, solve_with_freezing
 from .solvers.params import AdmmParams
 
 
@@ -156,11 +157,39 @@ def lens_row_bands(lens_rows: int, per_row: tuple[int, int], limits: tuple[int, 
     return [(s0, min(s0 + per_band, lens_rows)) for s0 in range(0, lens_rows, per_band)]
 
 
+# Freezing converged lenses (lfcl/solvers/freeze.py): the methods whose prior couples no two
+# lenses, the fraction of the stop tolerance used by freeze=True, and the default (docs/auto.md).
+FREEZABLE = ("admm-uv", "admm-uv-xc")
+FREEZE_FRACTION = 0.3
+FREEZE_DEFAULT = False
+
+#: The first estimates an ADMM method can start from (``demosaic_lightfield(start=...)``).
+STARTS = ("malvar", "linear4d")
+
+
+def freeze_settings_for(method: str, freeze) -> FreezeSettings | None:
+    """The freezing ``demosaic_lightfield(freeze=...)`` asks for with ``method`` (None: off)."""
+    if freeze is None:
+        freeze = FREEZE_DEFAULT if method in FREEZABLE else False
+    settings = freeze if isinstance(freeze, FreezeSettings) else None  # also says when the solver shrinks
+    freeze = settings.fraction if settings is not None else freeze
+    if freeze is False or (not isinstance(freeze, bool) and freeze == 0):
+        return None
+    if method not in FREEZABLE:
+        raise ValueError(f"freeze needs a prior that couples no two lenses ({', '.join(FREEZABLE)}), not {method}")
+    if freeze is True:
+        return FreezeSettings(fraction=FREEZE_FRACTION)
+    if not isinstance(freeze, (int, float)) or not 0 < freeze <= 1:
+        raise ValueError(f"freeze must be True, False or a fraction of the stop tolerance in (0, 1], got {freeze!r}")
+    return settings or FreezeSettings(fraction=float(freeze))
+
+
 def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
                         lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
                         device=None, callback=None, max_memory: int | None = None,
                         lens_response=None, region_rows: int | None = None,
-                        tolerance_db: float | None = None) -> DemosaicResult:
+                        tolerance_db: float | None = None, freeze: bool | float | FreezeSettings | None = None,
+                        start: str | None = None) -> DemosaicResult:
     """Demosaic (and denoise) a normalised lenslet mosaic [H, W] into [3, H, W] planes.
 
     H and W must be whole multiples of the pitch (crop first). ``noise`` defaults to
@@ -178,6 +207,16 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     each stopping on its own rule, so that regions that converge early (flat ones)
     stop early; exact for the (u, v) prior, which couples no two lenses
     (measured in docs/auto.md: it did not pay).
+    ``freeze`` (admm-uv, admm-uv-xc): freeze blocks of lenses whose rms change per
+    iteration falls to this fraction of the stop tolerance and drop them from the work,
+    while the global rule decides the stop (lfcl/solvers/freeze.py); True: the fraction
+    FREEZE_FRACTION, False or 0: off, None: FREEZE_DEFAULT (measured in docs/auto.md);
+    a FreezeSettings also sets when the solver shrinks. What froze goes into
+    ``parameters["freeze"]``; after a move, ``callback``'s x holds the lenses still solved.
+    ``start`` (ADMM methods): the first estimate, ``"malvar"`` (the paper's, and the
+    default) or ``"linear4d"`` (the learned 4D filter, which also reads the neighbouring
+    lenses: measured in docs/auto.md, it gains on textured and multi-plane scenes and
+    loses on large flat in-focus patches). ``auto`` takes the start its rule names.
     """
     method = parse_method(method)
     mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
@@ -188,38 +227,60 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         raise ValueError(f"mosaic {mosaic.shape[0]}x{mosaic.shape[1]} is not a whole number of {U}x{V} lenses")
     if not np.all(np.isfinite(mosaic)):
         raise ValueError("mosaic holds NaN or Inf values")
+    if start not in (None, *STARTS):
+        raise ValueError(f"start must be one of {', '.join(STARTS)}, got {start!r}")
     if method == "auto":  # choose the method and strength from the noise level (lfcl/auto.py), then run it
         from .auto import choose
 
         noise = noise if noise is not None else estimate_noise(mosaic, pattern, pitch, origin)
-        choice = choose(noise.sigma)
+        choice, replaced = choose(noise.sigma), None
+        if "linear4d" in (choice.method, choice.start):
+            from .auto import AUTO_FALLBACK, replacement
+            from .ops.linear4d import load_model
+
+            fitted = tuple(load_model().pitch)
+            if tuple(int(p) for p in pitch) != fitted:
+                why = f"linear4d has coefficients for {fitted[0]}x{fitted[1]} lenses only, not {U}x{V}"
+                choice, replaced = replacement(choice, why, *((AUTO_FALLBACK, 1.0) if choice.method == "linear4d"
+                                                              else ()))
         result = demosaic_lightfield(mosaic, pattern, pitch, choice.method, origin=origin, lam=lam,
                                      iterations=iterations, rho=rho, strength=strength * choice.strength,
                                      noise=noise, device=device, callback=callback, max_memory=max_memory,
                                      lens_response=lens_response, region_rows=region_rows,
-                                     tolerance_db=tolerance_db)
-        result.parameters = {**result.parameters, "auto": choice.as_dict()}
+                                     tolerance_db=tolerance_db,
+                                     freeze=freeze if choice.method in FREEZABLE else None,
+                                     start=start if start is not None else choice.start)
+        result.parameters = {**result.parameters, "auto": {**choice.as_dict(),
+                                                           **({"replaced": replaced} if replaced else {})}}
         return result
+    freeze_settings = freeze_settings_for(method, freeze)
     raw_mosaic, lens_weights = mosaic, None
     if lens_response is not None:
         mosaic, lens_weights = flat_field(mosaic, lens_response)
     runtime = get_runtime(device)
-    start = time.perf_counter()
+    began = time.perf_counter()
     if method == "linear4d":  # learned 4D linear filter, coefficients picked by the noise (docs/linear4d.md)
         from .ops.linear4d import linear4d
 
         noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
         planes = linear4d(runtime, mosaic, pattern, pitch, origin, noise)
         _check_finite(planes, "linear4d", mosaic)
-        return DemosaicResult(planes, method, {}, 0, time.perf_counter() - start, "direct", [], noise)
+        return DemosaicResult(planes, method, {}, 0, time.perf_counter() - began, "direct", [], noise)
     b = runtime.to_device(mosaic)
-    x0 = Malvar(runtime, mosaic.shape, pattern, origin).forward(b)
+    start = "malvar" if method == "malvar" else start or "malvar"
+    if start == "linear4d":
+        from .ops.linear4d import linear4d_operator
+
+        noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
+        x0 = linear4d_operator(runtime, mosaic, pattern, pitch, origin, noise).forward(b)
+    else:
+        x0 = Malvar(runtime, mosaic.shape, pattern, origin).forward(b)
     if method == "malvar":
         planes = x0.get()
         _check_finite(planes, "malvar", mosaic)
-        return DemosaicResult(planes, method, {}, 0, time.perf_counter() - start, "direct", [], None)
+        return DemosaicResult(planes, method, {}, 0, time.perf_counter() - began, "direct", [], None)
     if not math.isfinite(Reductions(runtime).abs_sum(x0)):  # on the device: no 3-plane copy to the host
-        _check_finite(np.array([np.inf]), "the Malvar start", mosaic)
+        _check_finite(np.array([np.inf]), f"the {start} start", mosaic)
     defaults = ADMM_DEFAULTS[method]
     needs_sigma = lam is None or tolerance_db is not None or (iterations is None and defaults.change_per_sigma > 0)
     if noise is None and needs_sigma:
@@ -236,9 +297,18 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     needed = solver_bytes((H, W), dims, exact=dims == "uv", cross_channel=params.cross_channel)
     largest = solver_largest_buffer((H, W), dims)
     fits = needed <= budget and largest <= runtime.device.max_mem_alloc_size
+    freeze_reports = []
+
+    def solve(solver, b, x0):
+        if freeze_settings is None:
+            return solver.solve(b, x0, params, callback=callback, lens_weights=lens_weights)
+        result, report = solve_with_freezing(solver, b, x0, params, freeze_settings, callback=callback,
+                                             lens_weights=lens_weights)
+        freeze_reports.append(report)
+        return result
+
     if fits and region_rows is None:
-        result = AdmmSolver(runtime, mosaic.shape, pattern, pitch, dims, origin).solve(
-            b, x0, params, callback=callback, lens_weights=lens_weights)
+        result = solve(AdmmSolver(runtime, mosaic.shape, pattern, pitch, dims, origin), b, x0)
         planes, runs = result.x.get(), [result]
     elif dims == "uv":
         per_row = (solver_bytes((U, W), dims, exact=True, cross_channel=params.cross_channel),
@@ -256,8 +326,7 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
             key = (rows.stop - rows.start, (origin[0] + rows.start) % 2)
             if key not in solvers:
                 solvers[key] = AdmmSolver(runtime, (key[0], W), pattern, pitch, dims, (origin[0] + rows.start, origin[1]))
-            result = solvers[key].solve(runtime.to_device(mosaic[rows]), runtime.to_device(x0_host[:, rows]), params,
-                                        callback=callback, lens_weights=lens_weights)
+            result = solve(solvers[key], runtime.to_device(mosaic[rows]), runtime.to_device(x0_host[:, rows]))
             planes[:, rows] = result.x.get()
             runs.append(result)
     else:
@@ -275,7 +344,12 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         f"{len(runs)} bands of lens rows, {min(counts)}-{max(counts)} iterations (mean over lens rows "
         f"{np.average(counts, weights=[r.x.shape[1] for r in runs]):.1f}), each stopped by its own rule "
         f"(last band: {runs[-1].stop_reason})")
+    parameters = dataclasses.asdict(params)
+    parameters["start"] = start
+    if freeze_reports:
+        parameters["freeze"] = {**combine_reports(freeze_reports), "fraction": freeze_settings.fraction,
+                                "shrink_at": freeze_settings.shrink_at}
     return DemosaicResult(
-        planes, method, dataclasses.asdict(params), max(run.iterations for run in runs), time.perf_counter() - start,
+        planes, method, parameters, max(run.iterations for run in runs), time.perf_counter() - began,
         reason, history, noise,
     )

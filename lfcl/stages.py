@@ -241,6 +241,8 @@ class Demosaic:
     move PSNR by less than this (docs/auto.md); None: the method's own rule.
     ``max_memory``: device bytes the solver may use (None: 80 % of the device's; a larger
     admm-uv problem on an aligned grid runs in bands of lens rows).
+    ``start``: the ADMM methods' first estimate (``lfcl.methods.STARTS``; aligned grids only), None:
+    the method's (Malvar; ``auto``: the one its rule names).
     ``device``: an OpenCL device spec or None (``LFCL_DEVICE``, else the first device).
     ``callback(record, x)``: called after every ADMM iteration (progress bars)."""
 
@@ -248,8 +250,8 @@ class Demosaic:
 
     def __init__(self, method: str = "admm-uv", lam: float | None = None, iterations: int | None = None,
                  strength: float = 1.0, device=None, callback=None, max_memory: int | None = None,
-                 tolerance_db: float | None = None):
-        from .methods import parse_method
+                 tolerance_db: float | None = None, start: str | None = None):
+        from .methods import STARTS, parse_method
 
         try:
             self.method = parse_method(method)
@@ -269,13 +271,16 @@ class Demosaic:
                                          or not math.isfinite(tolerance_db) or not tolerance_db > 0):
             raise ValueError(f"Demosaic: tolerance_db must be a number of dB > 0 or None, got {tolerance_db!r}")
         self.tolerance_db = None if tolerance_db is None else float(tolerance_db)
+        if start is not None and start not in STARTS:
+            raise ValueError(f"Demosaic: start must be one of {', '.join(STARTS)} or None, got {start!r}")
+        self.start = start
         self.lam, self.iterations, self.strength = lam, iterations, float(strength)
         self.max_memory = None if max_memory is None else int(max_memory)
         self.device, self.callback = device, callback
 
     def options(self) -> dict:
         return {"method": self.method, "lambda": self.lam, "iterations": self.iterations, "strength": self.strength,
-                "tolerance_db": self.tolerance_db, "max_memory": self.max_memory}
+                "tolerance_db": self.tolerance_db, "max_memory": self.max_memory, "start": self.start}
 
     def __call__(self, gridded: Gridded) -> Demosaiced:
         _need(gridded, Gridded, "Demosaic", "a Gridded (from Grid)")
@@ -299,6 +304,9 @@ class Demosaic:
         if kind == "resampled":
             from .grid_demosaic import demosaic_resampled
 
+            if self.start not in (None, "malvar"):
+                raise ValueError(f"Demosaic: start {self.start} needs an aligned square lens grid; this one is "
+                                 f"{grid_words(gridded.metadata['geometry'])} (use the default start)")
             result = demosaic_resampled(gridded.data, mosaic.pattern, gridded.sampling, self.method, lam=self.lam,
                                         iterations=self.iterations, strength=self.strength, noise=noise,
                                         device=self.device, callback=self.callback, max_memory=self.max_memory,
@@ -313,7 +321,7 @@ class Demosaic:
                                          lam=self.lam, iterations=self.iterations, strength=self.strength,
                                          noise=noise, device=self.device, callback=self.callback,
                                          lens_response=gridded.lens_response, max_memory=self.max_memory,
-                                         tolerance_db=self.tolerance_db)
+                                         tolerance_db=self.tolerance_db, start=self.start)
             S, T = gridded.lenses
             lightfield = planes_to_exchange(result.planes, LightFieldShape(S, T, P, P))
         meta = {

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lfcl.auto import choose, load_rule, parse_candidate
-from lfcl.bench.auto_rule import band_of, fit_rule
+from lfcl.bench.auto_rule import band_of, fit_rule, held_out_losses, parse_seeds
 from lfcl.methods import demosaic_lightfield
 from lfcl.noise import NoiseEstimate
 
@@ -37,8 +37,30 @@ def test_choose_rejects_a_bad_noise_level(sigma):
 
 
 def test_parse_candidate():
-    assert parse_candidate("admm-uv@0.5") == ("admm-uv", 0.5)
-    assert parse_candidate("malvar") == ("malvar", 1.0)
+    assert parse_candidate("admm-uv@0.5") == ("admm-uv", 0.5, "malvar")
+    assert parse_candidate("malvar") == ("malvar", 1.0, "malvar")
+    assert parse_candidate("admm-uv-xc@2:linear4d") == ("admm-uv-xc", 2.0, "linear4d")
+
+
+def test_a_candidate_with_another_start_is_a_fixed_method_and_its_loss_counts():
+    # the linear4d start at strength 1 is a fixed method (`--start linear4d`), so the loss of the
+    # Malvar start is measured against it too; strength 2 is not fixed and does not set the bar
+    rows = [_row(0.005, {"admm-uv-xc@1": (40.0, 45.0, 1.0), "admm-uv-xc@1:linear4d": (39.5, 46.0, 1.0),
+                         "admm-uv-xc@2": (41.0, 47.0, 1.0)})]
+    rule = fit_rule(rows, within=0.1)
+    assert rule[0]["losses_db"] == pytest.approx({"admm-uv-xc@1": 1.0, "admm-uv-xc@1:linear4d": 0.5,
+                                                  "admm-uv-xc@2": -1.0})
+    assert rule[0]["candidate"] == "admm-uv-xc@2"
+    assert choose(0.005, rule).start == "malvar"
+    held_out = held_out_losses([dict(rows[0], scene="charts", seed=0, lux=12)], rule)
+    assert held_out == [{"scene": "charts", "seed": 0, "lux": 12, "candidate": "admm-uv-xc@2",
+                         "loss_db": pytest.approx(-1.0)}]
+
+
+def test_parse_seeds():
+    assert parse_seeds("1,2") == [1, 2]
+    assert parse_seeds("2000-2002,7") == [2000, 2001, 2002, 7]
+    assert parse_seeds("") == []
 
 
 def _row(sigma, results):
@@ -76,8 +98,9 @@ def test_auto_runs_the_chosen_method_and_records_why(rng):
     noise = NoiseEstimate(gain=0.0, floor=0.004**2, sigma=0.004, source="test")
     auto = demosaic_lightfield(mosaic, "GRBG", (9, 9), "auto", noise=noise)
     choice = choose(0.004)
-    direct = demosaic_lightfield(mosaic, "GRBG", (9, 9), choice.method, noise=noise, strength=choice.strength)
-    assert auto.method == choice.method
+    direct = demosaic_lightfield(mosaic, "GRBG", (9, 9), choice.method, noise=noise, strength=choice.strength,
+                                 start=choice.start)
+    assert auto.method == choice.method and auto.parameters["start"] == choice.start
     assert auto.parameters["auto"]["method"] == choice.method and "sigma 0.004" in auto.parameters["auto"]["reason"]
     np.testing.assert_array_equal(auto.planes, direct.planes)
 
@@ -117,3 +140,22 @@ def test_tolerance_db_must_be_positive():
 
     with pytest.raises(ValueError, match="dB > 0"):
         change_for_tolerance_db(0.0)
+
+
+@pytest.mark.parametrize("candidate, ran", [("admm-uv-xc@2:linear4d", ("admm-uv-xc", 2.0)),
+                                            ("linear4d", ("admm-uv", 1.0))])
+def test_auto_without_linear4d_coefficients_for_the_pitch_runs_from_malvar(rng, monkeypatch, candidate, ran):
+    import lfcl.auto
+
+    band = {"sigma_from": 0.0, "sigma_to": 1.0, "candidate": candidate, "worst_loss_db": 0.0, "within_db": 0.1,
+            "captures": 1}
+    monkeypatch.setattr(lfcl.auto, "load_rule", lambda: (band,))
+    mosaic = (0.3 + 0.02 * rng.standard_normal((25, 25))).astype(np.float32)  # 5x5 lenses of 5x5 pixels
+    noise = NoiseEstimate(gain=0.0, floor=0.004**2, sigma=0.004, source="test")
+    auto = demosaic_lightfield(mosaic, "GRBG", (5, 5), "auto", noise=noise)
+    record = auto.parameters["auto"]
+    assert (record["method"], record["strength"], record["start"]) == (*ran, "malvar")
+    assert record["replaced"]["start" if candidate != "linear4d" else "method"] == "linear4d"
+    assert "coefficients for 9x9 lenses only, not 5x5" in record["reason"]
+    direct = demosaic_lightfield(mosaic, "GRBG", (5, 5), ran[0], noise=noise, strength=ran[1])
+    np.testing.assert_array_equal(auto.planes, direct.planes)

@@ -172,20 +172,22 @@ def test_batch_writes_the_same_bytes_as_process(captures, processed, tmp_path):
 
 @pytest.mark.parametrize("grid", ["rotated", "aligned"])
 def test_auto_names_and_runs_its_choice(grid, processed):
-    from lfcl.auto import choose
-    from lfcl.grid_demosaic import AUTO_FALLBACK, GRID_METHODS
+    from lfcl.auto import AUTO_FALLBACK, choose
+    from lfcl.grid_demosaic import GRID_METHODS
 
     out, summary, text = processed(grid, "auto", "--outputs", "lightfield", "--no-previews")
     auto = summary["parameters"]["auto"]
     choice = choose(auto["sigma"])
-    method, strength = choice.method, choice.strength
-    if grid != "aligned" and method not in GRID_METHODS:  # the resampled path falls back
-        method, strength = AUTO_FALLBACK, 1.0
-        assert auto["replaced"] == {"method": choice.method, "strength": choice.strength}
-    assert (auto["method"], auto["strength"]) == (method, strength)
+    method, strength, start = choice.method, choice.strength, choice.start
+    if grid != "aligned" and (method not in GRID_METHODS or start != "malvar"):  # the resampled path falls back
+        method, strength, start = AUTO_FALLBACK, 1.0, "malvar"
+        replaced = {"method": choice.method, "strength": choice.strength, "start": choice.start}
+        assert {k: auto["replaced"][k] for k in replaced} == replaced
+        assert "does not run on resampled lens grids" in auto["replaced"]["why"]
+    assert (auto["method"], auto["strength"], auto["start"]) == (method, strength, start)
     assert summary["method"] == "auto" and f"auto -> {method}" in text and choice.reason[:40] in text
-    # auto is its choice run at its strength: the same bytes as asking for that method
-    chosen, _, _ = processed(grid, method, "--strength", f"{strength:g}", "--outputs", "lightfield",
+    # auto is its choice run at its strength and start: the same bytes as asking for that method
+    chosen, _, _ = processed(grid, method, "--strength", f"{strength:g}", "--start", start, "--outputs", "lightfield",
                              "--no-previews")
     assert (out / "lightfield.npy").read_bytes() == (chosen / "lightfield.npy").read_bytes()
 
@@ -213,19 +215,27 @@ def test_auto_lists_what_it_skipped_for_a_cheaper_method(captures, monkeypatch, 
     assert "skipped:" in result.output and "admm-uv@1 (auto chose the cheaper malvar" in result.output
 
 
-def test_auto_on_a_resampled_grid_replaces_a_method_it_cannot_run(captures, monkeypatch, tmp_path):
+@pytest.mark.parametrize("candidate, replaced", [
+    ("linear4d", {"method": "linear4d", "strength": 1.0, "start": "malvar"}),
+    ("admm-uv@1:linear4d", {"method": "admm-uv", "strength": 1.0, "start": "linear4d"}),  # no linear4d there
+])
+def test_auto_on_a_resampled_grid_replaces_a_method_it_cannot_run(captures, monkeypatch, tmp_path, candidate,
+                                                                  replaced):
     import lfcl.auto
 
-    monkeypatch.setattr(lfcl.auto, "load_rule", lambda: _rule("linear4d", {"linear4d": 0.0, "admm-uv@1": 0.2}))
+    monkeypatch.setattr(lfcl.auto, "load_rule", lambda: _rule(candidate, {candidate: 0.0, "admm-uv@1": 0.2}))
     out = tmp_path / "out"
     result = invoke("process", captures / "hex" / "raw.dng", "--calibration", captures / "hex" / "cal.json",
                     "--method", "auto", "-o", out, "--outputs", "lightfield", "--no-previews", "--json")
     assert result.exit_code == 0, result.output
     summary = json.loads(result.output)
     auto = summary["parameters"]["auto"]
-    assert auto["method"] == "admm-uv" and auto["replaced"] == {"method": "linear4d", "strength": 1.0}
+    assert auto["method"] == "admm-uv" and auto["start"] == "malvar"
+    assert {k: auto["replaced"][k] for k in replaced} == replaced
+    assert "does not run on resampled lens grids" in auto["replaced"]["why"]
     assert "does not run on resampled lens grids" in auto["reason"] and summary["iterations"] >= 1
-    assert [s["output"] for s in summary["skipped"] if s.get("stage") == "demosaic"] == ["linear4d"]
+    assert summary["parameters"]["start"] == "malvar"
+    assert [s["output"] for s in summary["skipped"] if s.get("stage") == "demosaic"] == [replaced["method"]]
 
 
 @pytest.mark.parametrize("grid", ["rotated", "aligned"])
@@ -274,3 +284,11 @@ def test_stage_contracts_of_the_resampled_kind(captures):
     for bad in (0, -1.0, float("nan"), True, "1"):
         with pytest.raises(ValueError, match="tolerance_db"):
             Demosaic("admm-uv", tolerance_db=bad)
+
+
+def test_a_linear4d_start_on_a_resampled_grid_is_one_line_before_any_work(captures, tmp_path):
+    out = tmp_path / "out"
+    result = invoke("process", captures / "rotated" / "raw.dng", "--calibration", captures / "rotated" / "cal.json",
+                    "--method", "admm-uv", "--start", "linear4d", "-o", out)
+    assert result.exit_code != 0 and "--start linear4d needs an aligned square lens grid" in result.output
+    assert "Traceback" not in result.output and not out.exists()

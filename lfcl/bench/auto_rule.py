@@ -2,11 +2,15 @@
 
 For each training scene, seed and illumination, simulate a capture, read its noise
 level sigma the way ``lfcl process`` does (the DNG NoiseProfile), run every
-candidate (a method and a lambda strength) and score it against the ground truth.
+candidate (a method, a lambda strength and, for ADMM, the start) and score it
+against the ground truth. The training scenes are the built-in ones at seeds other
+than the evaluation seed 0 and the procedural scenes of lfcl/bench/training_scenes.py
+(seeds 2000 on; linear4d was fitted on seeds 1000-1047).
 Then, for each band of sigma (four per decade), pick the *cheapest* candidate
 whose worst loss against the best fixed method (every method at its default
-strength; PSNR of the centre view and of the mean image) is within ``--within``
-dB of the smallest such loss (``fit_rule``).
+strength, either start; PSNR of the centre view and of the mean image) is within
+``--within`` dB of the smallest such loss (``fit_rule``). ``--held-out-seeds`` scores
+the same candidates on other captures and prints what the fitted rule loses there.
 
 The training seeds (default 1, 2) are not the evaluation seed 0 of docs/admm.md.
 
@@ -22,46 +26,63 @@ import time
 import numpy as np
 
 from .. import __version__
-from ..evaluate import capture_in_memory, run_method
+from ..auto import band_for, parse_candidate
+from ..evaluate import Capture, capture_in_memory, run_method
 
-DEFAULT_CANDIDATES = "malvar,admm-uv@0.5,admm-uv@1,admm-uv@2,admm-uv@4,admm-uvst@1"
+DEFAULT_CANDIDATES = ("malvar,linear4d,admm-uv@1,admm-uv@1:linear4d,admm-uvst@1,admm-uv-xc@1,admm-uv-xc@2,"
+                      "admm-uv-xc@1:linear4d,admm-uv-xc@2:linear4d,admm-uvst-xc@1")
 #: Band edges in log10(sigma): four bands per decade.
 BANDS_PER_DECADE = 4
 
 
-def parse_candidates(spec: str) -> list[tuple[str, float]]:
-    """'method[@strength],...' -> [(method, strength)]."""
-    out = []
-    for item in spec.split(","):
-        method, _, strength = item.strip().partition("@")
-        out.append((method, float(strength) if strength else 1.0))
-    return out
+def parse_candidates(spec: str) -> list[tuple[str, float, str]]:
+    """'method[@strength][:start],...' -> [(method, strength, start)]."""
+    return [parse_candidate(item.strip()) for item in spec.split(",")]
 
 
-def candidate_name(method: str, strength: float) -> str:
-    return method if method == "malvar" or method == "linear4d" else f"{method}@{strength:g}"
+def candidate_name(method: str, strength: float, start: str = "malvar") -> str:
+    if method in ("malvar", "linear4d"):
+        return method
+    return f"{method}@{strength:g}" + ("" if start == "malvar" else f":{start}")
 
 
-def score_captures(scenes, seeds, lux_levels, lenses, candidates, log=print) -> list[dict]:
-    """Every candidate on every training capture: sigma, PSNRs and seconds."""
-    rows = []
+def training_captures(scenes, seeds, procedural_seeds, lux_levels, lenses):
+    """Yield ``(scene label, seed, lux, Capture)``: built-in scenes, then procedural ones."""
+    from pathlib import Path
+
+    from ..sim import render_planes, simulate
+    from .training_scenes import training_planes
+
     for scene in scenes:
         for seed in seeds:
             for lux in lux_levels:
                 meta = {"scene": {"kind": "scene", "name": scene}, "lenses": list(lenses), "pitch": [9, 9],
                         "pattern": "GRBG", "seed": seed}
-                capture = capture_in_memory(meta, lux)
-                row = {"scene": scene, "seed": seed, "lux": lux, "results": {}}
-                for method, strength in candidates:
-                    overrides = {} if method in ("malvar", "linear4d") else {"strength": strength}
-                    result = run_method(capture, method, **overrides)
-                    if result["noise_sigma"] is not None:
-                        row["sigma"] = result["noise_sigma"]
-                    row["results"][candidate_name(method, strength)] = {
-                        k: result[k] for k in ("psnr_center", "psnr_mean", "seconds", "iterations")}
-                log(f"{scene:10s} seed {seed} {lux:6g} lux sigma {row.get('sigma', float('nan')):.5f}  " + "  ".join(
-                    f"{name} {r['psnr_center']:.2f}/{r['psnr_mean']:.2f}" for name, r in row["results"].items()))
-                rows.append(row)
+                yield scene, seed, lux, capture_in_memory(meta, lux)
+    for seed in procedural_seeds:
+        radiance = render_planes(training_planes(lenses, seed, (9, 9)), lenses, (9, 9))  # once per scene
+        for lux in lux_levels:
+            sim = simulate(lightfield=radiance, lux=lux, seed=seed)
+            yield "procedural", seed, lux, Capture(Path("."), sim.normalised_raw(), sim.pattern,
+                                                   tuple(sim.geometry.pitch), sim.truth, sim.meta,
+                                                   list(sim.sensor.noise_profile()) * 3)
+
+
+def score_captures(captures, candidates, log=print) -> list[dict]:
+    """Every candidate on every capture of ``captures`` (training_captures): sigma, PSNRs and seconds."""
+    rows = []
+    for scene, seed, lux, capture in captures:
+        row = {"scene": scene, "seed": seed, "lux": lux, "results": {}}
+        for method, strength, start in candidates:
+            overrides = {} if method in ("malvar", "linear4d") else {"strength": strength, "start": start}
+            result = run_method(capture, method, **overrides)
+            if result["noise_sigma"] is not None:
+                row["sigma"] = result["noise_sigma"]
+            row["results"][candidate_name(method, strength, start)] = {
+                k: result[k] for k in ("psnr_center", "psnr_mean", "seconds", "iterations")}
+        log(f"{scene:10s} seed {seed} {lux:6g} lux sigma {row.get('sigma', float('nan')):.5f}  " + "  ".join(
+            f"{name} {r['psnr_center']:.2f}/{r['psnr_mean']:.2f}" for name, r in row["results"].items()))
+        rows.append(row)
     return rows
 
 
@@ -70,8 +91,16 @@ def band_of(sigma: float) -> int:
 
 
 def is_fixed(name: str) -> bool:
-    """A method at its default strength: the peers auto is measured against."""
-    return "@" not in name or name.endswith("@1")
+    """A method at its default strength (either start): the peers auto is measured against."""
+    return parse_candidate(name)[1] == 1.0
+
+
+def capture_loss(row: dict, name: str) -> float:
+    """How far candidate ``name`` falls below the best fixed method on one capture (dB; the
+    worse of the centre view and the mean image)."""
+    fixed = [n for n in row["results"] if is_fixed(n)]
+    return max(max(row["results"][n][key] for n in fixed) - row["results"][name][key]
+               for key in ("psnr_center", "psnr_mean"))
 
 
 def fit_rule(rows: list[dict], within: float) -> list[dict]:
@@ -84,7 +113,6 @@ def fit_rule(rows: list[dict], within: float) -> list[dict]:
     ``within`` dB of the smallest band loss.
     """
     names = list(rows[0]["results"])
-    fixed = [n for n in names if is_fixed(n)]
     seconds = {n: float(np.median([r["results"][n]["seconds"] for r in rows])) for n in names}
     bands: dict[int, list[dict]] = {}
     for r in rows:
@@ -94,8 +122,7 @@ def fit_rule(rows: list[dict], within: float) -> list[dict]:
         members = bands[band]
 
         def band_loss(name, members=members):
-            return max(max(r["results"][n][key] for n in fixed) - r["results"][name][key]
-                       for r in members for key in ("psnr_center", "psnr_mean"))
+            return max(capture_loss(r, name) for r in members)
 
         losses = {n: band_loss(n) for n in names}
         smallest = min(losses.values())
@@ -108,29 +135,61 @@ def fit_rule(rows: list[dict], within: float) -> list[dict]:
     return rule
 
 
+def parse_seeds(spec: str) -> list[int]:
+    """'1,2' or '2000-2011' (inclusive) or '' -> seeds."""
+    seeds = []
+    for item in filter(None, (part.strip() for part in spec.split(","))):
+        first, _, last = item.partition("-")
+        seeds += list(range(int(first), int(last or first) + 1))
+    return seeds
+
+
+def held_out_losses(rows: list[dict], rule: list[dict]) -> list[dict]:
+    """Per held-out capture: the candidate the rule picks for its sigma and its loss (capture_loss)."""
+    out = []
+    for r in rows:
+        picked = band_for(r["sigma"], rule)[0]["candidate"]
+        out.append({"scene": r["scene"], "seed": r["seed"], "lux": r["lux"], "candidate": picked,
+                    "loss_db": capture_loss(r, picked)})
+    return out
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("-o", "--output", required=True)
     parser.add_argument("--scenes", default="charts,deadleaves")
     parser.add_argument("--seeds", default="1,2")
+    parser.add_argument("--procedural-seeds", default="2000-2011",
+                        help="seeds of lfcl/bench/training_scenes.py scenes to train on ('' for none)")
+    parser.add_argument("--held-out-seeds", default="", help="seeds of --scenes to score the fitted rule on")
     parser.add_argument("--lux", default="0.25,0.5,1,2,4,8,12,25,50,100,200")
     parser.add_argument("--lenses", default="64x64")
     parser.add_argument("--candidates", default=DEFAULT_CANDIDATES)
     parser.add_argument("--within", type=float, default=0.1, help="dB a cheaper candidate may lose")
     args = parser.parse_args(argv)
-    start = time.perf_counter()
-    rows = score_captures(args.scenes.split(","), [int(s) for s in args.seeds.split(",")],
-                          [float(v) for v in args.lux.split(",")], [int(n) for n in args.lenses.split("x")],
-                          parse_candidates(args.candidates))
+    began = time.perf_counter()
+    lux = [float(v) for v in args.lux.split(",")]
+    lenses = tuple(int(n) for n in args.lenses.split("x"))
+    candidates = parse_candidates(args.candidates)
+    scenes = args.scenes.split(",")
+    rows = score_captures(training_captures(scenes, parse_seeds(args.seeds), parse_seeds(args.procedural_seeds), lux,
+                                            lenses), candidates)
     rule = fit_rule(rows, args.within)
     out = {"generator": f"lfcl {__version__} python -m lfcl.bench.auto_rule", "args": vars(args),
-           "seconds": time.perf_counter() - start, "rule": rule, "training": rows}
+           "seconds": time.perf_counter() - began, "rule": rule, "training": rows}
+    held_out = parse_seeds(args.held_out_seeds)
+    if held_out:
+        out["held_out"] = score_captures(training_captures(scenes, held_out, [], lux, lenses), candidates)
+        out["held_out_losses"] = held_out_losses(out["held_out"], rule)
     from ..imageio import write_json
 
     write_json(args.output, out)
     for band in rule:
         print(f"sigma {band['sigma_from']:.4g}-{band['sigma_to']:.4g}: {band['candidate']} "
               f"(worst loss {band['worst_loss_db']:.2f} dB over {band['captures']} captures)")
+    for row in out.get("held_out_losses", []):
+        print(f"held out: {row['scene']} seed {row['seed']} {row['lux']:g} lux: {row['candidate']} "
+              f"loses {row['loss_db']:.2f} dB to the best fixed method")
 
 
 if __name__ == "__main__":

@@ -64,6 +64,10 @@ _OPTIONS = (
                  metavar="DB",
                  help="Stop the ADMM iterations once one can move PSNR by less than DB dB (docs/auto.md); "
                       "default: the method's own stopping rule. With --iterations: at most that many."),
+    click.option("--start", default=None, type=click.Choice(["malvar", "linear4d"]),
+                 help="First estimate of the ADMM methods: malvar (the paper's) or linear4d (the learned 4D "
+                      "filter; gains on textured and multi-plane scenes, docs/auto.md). Default: malvar; "
+                      "with --method auto, the start its rule names."),
     click.option("--max-memory", default=None, type=click.FloatRange(min=0.01), metavar="GIB",
                  help="Device memory the solver may use, GiB; default 80% of the device's. A larger admm-uv "
                       "problem runs in bands of lens rows (exact: the (u, v) prior couples no two lenses)."),
@@ -93,7 +97,7 @@ class ProcessSettings:
     ``outputs``: the output kinds (``refocus`` added when ``--refocus`` was given);
     ``refocus``: the slopes spec (None when refocus is not among the outputs);
     ``max_memory``: bytes or None; ``tolerance_db``: the ADMM stop in dB or None (the
-    method's rule); ``recipe``: what the outputs record about a
+    method's rule); ``start``: the ADMM methods' first estimate or None (the method's); ``recipe``: what the outputs record about a
     ``--pipeline`` recipe (name, path, options, from_command_line) or None.
     """
 
@@ -113,6 +117,7 @@ class ProcessSettings:
     device: str | None = None
     recipe: dict | None = None
     tolerance_db: float | None = None
+    start: str | None = None
 
     def pipeline(self, callback=None):
         """The :class:`lfcl.stages.Pipeline` of these settings; ``callback``: per ADMM iteration (progress)."""
@@ -127,7 +132,7 @@ class ProcessSettings:
             Grid(pitch=self.pitch, calibration=self.calibration, white=self.white, pattern=self.pattern),
             Demosaic(self.method, lam=self.lam, iterations=self.iterations, strength=self.strength,
                      device=self.device, callback=callback, max_memory=self.max_memory,
-                     tolerance_db=self.tolerance_db),
+                     tolerance_db=self.tolerance_db, start=self.start),
             Outputs(list(self.outputs), refocus=self.refocus or DEFAULT_REFOCUS, fmt=self.fmt,
                     previews=self.previews, metadata=extra),
         ])
@@ -194,7 +199,7 @@ def settings_from_options(options: dict, ctx: click.Context | None = None) -> Pr
     if white is not None and not Path(white).is_file():
         raise FileNotFoundError(f"white image {str(white)!r} does not exist")
     if calibration is not None:
-        _check_method_for_calibration(method, calibration)
+        _check_method_for_calibration(method, calibration, options.get("start"))
     max_memory, tolerance_db = options["max_memory"], options.get("tolerance_db")
     settings = ProcessSettings(
         method=method, pitch=pitch, calibration=None if calibration is None else str(calibration),
@@ -202,13 +207,14 @@ def settings_from_options(options: dict, ctx: click.Context | None = None) -> Pr
         refocus=refocus_spec, fmt=fmt, previews=bool(previews), lam=lam, iterations=iterations,
         strength=float(strength), max_memory=None if max_memory is None else int(max_memory * 2**30),
         device=options["device"], recipe=recipe_meta,
-        tolerance_db=None if tolerance_db is None else float(tolerance_db))
+        tolerance_db=None if tolerance_db is None else float(tolerance_db), start=options.get("start"))
     settings.pipeline()  # the stages check the rest (--strength, --lambda, ...), still before any work
     return settings
 
 
-def _check_method_for_calibration(method: str, calibration) -> None:
-    """A method the calibration's grid path does not run: one line before any raw is read (once per batch)."""
+def _check_method_for_calibration(method: str, calibration, start: str | None = None) -> None:
+    """A method (or start) the calibration's grid path does not run: one line before any raw is read (once per
+    batch)."""
     from ..calib import load_calibration
     from ..calib.aligned import describe_grid, fit_grid
     from ..stages import check_method_for_grid, grid_words
@@ -218,6 +224,9 @@ def _check_method_for_calibration(method: str, calibration) -> None:
     geo = fit_grid(cal, what)
     words = grid_words({"grid": geo["kind"], "packing": cal.grid.packing, "features": geo["features"]})
     check_method_for_grid(method, geo["kind"], f"the {words} lens grid of {what} ({describe_grid(cal)})")
+    if geo["kind"] == "resampled" and start not in (None, "malvar"):
+        raise ValueError(f"--start {start} needs an aligned square lens grid; {what} gives the {words} lens grid "
+                         f"({describe_grid(cal)}): leave --start out")
 
 
 def process_summary(summary: dict) -> dict:
@@ -334,10 +343,12 @@ def summary_text(raw, out_dir, summary: dict) -> str:
     stop = f", tolerance {tolerance:g} dB" if tolerance is not None and summary["iterations"] else ""
     auto = params.get("auto")
     method = summary["method"]
+    start = f" from a {params['start']} start" if params.get("start", "malvar") != "malvar" else ""
     if auto:
         strength = f" at strength {auto['strength']:g}" if auto["strength"] != 1 else ""
-        method = f"auto -> {auto['method']}{strength} ({auto['reason']})\n  ran {auto['method']}"
-    lines.append(f"method {method}: {summary['iterations']} iterations ({summary['stop_reason']}){lam}{stop}")
+        method = f"auto -> {auto['method']}{strength}{start} ({auto['reason']})\n  ran {auto['method']}"
+        start = ""
+    lines.append(f"method {method}{start}: {summary['iterations']} iterations ({summary['stop_reason']}){lam}{stop}")
     secs = summary["seconds"]
     lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in secs.items()))
     per = summary.get("output_seconds", {})

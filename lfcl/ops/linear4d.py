@@ -374,9 +374,18 @@ def linear4d(runtime_or_device, mosaic, pattern: str, pitch, origin=(0, 0), nois
     mean level picks the coefficients. ``model`` defaults to the shipped coefficients.
     """
     from ..device import Runtime, get_runtime
-    from ..noise import estimate_noise
 
     runtime = runtime_or_device if isinstance(runtime_or_device, Runtime) else get_runtime(runtime_or_device)
+    mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
+    op = linear4d_operator(runtime, mosaic, pattern, pitch, origin, noise, model)
+    return op.forward(runtime.to_device(mosaic)).get()
+
+
+def linear4d_operator(runtime, mosaic, pattern: str, pitch, origin=(0, 0), noise=None, model=None) -> Linear4d:
+    """The :class:`Linear4d` for ``mosaic`` (host array): the coefficient set its noise level picks,
+    after the checks of :func:`linear4d`; its ``forward`` takes and gives device arrays."""
+    from ..noise import estimate_noise
+
     model = model if model is not None else load_model()
     pitch = tuple(int(p) for p in pitch)
     if pitch != tuple(model.pitch):
@@ -390,5 +399,4 @@ def linear4d(runtime_or_device, mosaic, pattern: str, pitch, origin=(0, 0), nois
     if noise is None:
         noise = estimate_noise(mosaic, pattern, pitch, origin)
     coefficients = select_coefficients(model, relative_noise(noise.sigma, mosaic))
-    op = Linear4d(runtime, mosaic.shape, pattern, pitch, model.taps, coefficients, origin)
-    return op.forward(runtime.to_device(mosaic)).get()
+    return Linear4d(runtime, mosaic.shape, pattern, pitch, model.taps, coefficients, origin)

@@ -1,0 +1,95 @@
+"""The ADMM methods' first estimate: ``start="malvar"`` (the paper's) or ``"linear4d"`` (lfcl.methods)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from lfcl.cli import cli
+from lfcl.methods import demosaic_lightfield
+from lfcl.noise import NoiseEstimate
+from lfcl.ops.linear4d import linear4d
+from lfcl.ops.malvar import malvar_np
+from lfcl.solvers.params import AdmmParams
+from lfcl.solvers.reference import admm_reference
+
+NOISE = NoiseEstimate(gain=0.0, floor=0.01**2, sigma=0.01, source="test")
+
+
+@pytest.fixture(scope="module")
+def textured_mosaic():
+    """A 4x5-lens GRBG mosaic of a textured scene with noise (the starts differ on it)."""
+    from lfcl.sim import simulate
+
+    sim = simulate("deadleaves", lenses=(4, 5), lux=4, seed=5)
+    return sim.normalised_raw()
+
+
+def test_linear4d_start_is_admm_from_the_linear4d_planes(runtime, textured_mosaic):
+    """With a fixed budget, start="linear4d" is the float64 reference ADMM run from linear4d's output."""
+    b = textured_mosaic
+    got = demosaic_lightfield(b, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=6, start="linear4d")
+    x0 = linear4d(runtime, b, "GRBG", (9, 9), (0, 0), NOISE).astype(np.float64)
+    # the device's x-update is the exact per-lens solve: the reference gets CG run to convergence
+    reference_params = dataclasses.replace(
+        AdmmParams(**{k: got.parameters[k] for k in AdmmParams.__dataclass_fields__}), cg_steps=200, cg_tol=1e-12)
+    expected = admm_reference(b.astype(np.float64), "GRBG", (9, 9), "uv", reference_params, x0)
+    relative = np.linalg.norm(got.planes - expected.x) / np.linalg.norm(expected.x)
+    assert relative <= 1e-4, relative
+    assert got.parameters["start"] == "linear4d"
+    # and it is a different start: from Malvar the same budget ends elsewhere
+    from_malvar = admm_reference(b.astype(np.float64), "GRBG", (9, 9), "uv", reference_params,
+                                 malvar_np(b, "GRBG").astype(np.float64))
+    assert np.linalg.norm(from_malvar.x - expected.x) > 10 * np.linalg.norm(got.planes - expected.x)
+
+
+def test_default_start_is_malvar(textured_mosaic):
+    default = demosaic_lightfield(textured_mosaic, "GRBG", (9, 9), "admm-uv-xc", noise=NOISE, iterations=3)
+    malvar = demosaic_lightfield(textured_mosaic, "GRBG", (9, 9), "admm-uv-xc", noise=NOISE, iterations=3,
+                                 start="malvar")
+    assert default.parameters["start"] == "malvar"
+    np.testing.assert_array_equal(default.planes, malvar.planes)
+
+
+def test_a_bad_start_is_one_line(textured_mosaic):
+    with pytest.raises(ValueError, match="start must be one of malvar, linear4d"):
+        demosaic_lightfield(textured_mosaic, "GRBG", (9, 9), "admm-uv", start="bilinear")
+
+
+def test_process_start_option_reaches_the_solver_and_the_summary(tmp_path):
+    capture = tmp_path / "cap"
+    result = CliRunner().invoke(cli, ["simulate", "--scene", "deadleaves", "--lenses", "8x8", "--lux", "4",
+                                      "--seed", "2", "-o", str(capture)])
+    assert result.exit_code == 0, result.output
+    summaries = {}
+    for start in ("malvar", "linear4d"):
+        out = tmp_path / start
+        result = CliRunner().invoke(cli, ["process", str(capture / "raw.dng"), "--pitch", "9", "--method", "admm-uv",
+                                          "--start", start, "--outputs", "center", "--no-previews", "-o", str(out),
+                                          "--json"])
+        assert result.exit_code == 0, result.output
+        summaries[start] = json.loads(result.output)
+    assert summaries["linear4d"]["parameters"]["start"] == "linear4d"
+    assert summaries["malvar"]["parameters"]["start"] == "malvar"
+    result = CliRunner().invoke(cli, ["process", str(capture / "raw.dng"), "--start", "nearest", "-o",
+                                      str(tmp_path / "bad")])
+    assert result.exit_code != 0 and "nearest" in result.output and not (tmp_path / "bad").exists()
+
+
+def test_evaluate_takes_a_method_with_its_start(tmp_path):
+    from lfcl.evaluate import check_methods
+
+    assert check_methods(["admm-uv-xc:linear4d", "malvar"]) == ["admm-uv-xc:linear4d", "malvar"]
+    with pytest.raises(ValueError, match="goes with an ADMM method only"):
+        check_methods(["malvar:linear4d"])
+    capture = tmp_path / "cap"
+    assert CliRunner().invoke(cli, ["simulate", "--lenses", "6x6", "--lux", "8", "-o", str(capture)]).exit_code == 0
+    result = CliRunner().invoke(cli, ["evaluate", str(capture), "--methods", "admm-uv,admm-uv:linear4d", "--json"])
+    assert result.exit_code == 0, result.output
+    rows = json.loads(result.output)["results"]
+    assert [r["method"] for r in rows] == ["admm-uv", "admm-uv:linear4d"]
+    assert rows[0]["psnr_center"] != rows[1]["psnr_center"]
