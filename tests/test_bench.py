@@ -80,7 +80,7 @@ def test_bench_pareto_json(tmp_path):
     assert report["lenses"] == [8, 8] and report["budgets"] == [1, 2] and report["reference_budgets"] == [1, 2]
     points = report["points"]
     methods = [(p["method"], p["iterations"]) for p in points]
-    assert methods == [("malvar", 0), ("admm-uv", 1), ("admm-uv", 2), ("admm-st", 1), ("admm-st", 2),
+    assert methods == [("malvar", 0), ("linear4d", 0), ("admm-uv", 1), ("admm-uv", 2), ("admm-st", 1), ("admm-st", 2),
                        ("admm-uvst", 1), ("admm-uvst", 2), ("colour-demosaicing Malvar2004", 0),
                        ("numpy reference admm-uv (CG)", 1), ("numpy reference admm-uv (CG)", 2)]
     for p in points:
@@ -120,3 +120,14 @@ def test_bench_admm_json():
     assert row["default_per_iteration"] > 0 and row["default_x_update"]
     assert row["device_per_iteration"] > 0 and row["reference_per_iteration"] > 0
     assert row["max_abs_diff"] < 1e-3
+
+
+def test_bench_pareto_takes_an_admm_method_with_its_start(tmp_path):
+    result = _invoke(["bench", "pareto", "--lenses", "8x8", "--budgets", "2", "--reference-budgets", "none",
+                      "--methods", "admm-uv,admm-uv:linear4d", "--json", "-o", str(tmp_path / "p")])
+    assert result.exit_code == 0, result.output
+    points = {p["method"]: p for p in json.loads(result.stdout)["points"]}
+    assert points["admm-uv:linear4d"]["psnr_center"] != points["admm-uv"]["psnr_center"]
+    bad = _invoke(["bench", "pareto", "--lenses", "8x8", "--budgets", "1", "--methods", "admm-uv:nearest",
+                   "-o", str(tmp_path / "q")])
+    assert bad.exit_code != 0 and "NAME:START" in bad.output

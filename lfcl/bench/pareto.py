@@ -4,8 +4,10 @@ Pareto: on one simulated capture (a ``lfcl simulate`` folder, or simulated in
 memory), every method at every iteration budget gives one point (seconds, PSNR of
 the centre view, PSNR of the mean image), with two peers timed in the same run:
 
-* ``malvar``: lfcl's OpenCL Malvar-He-Cutler (one point; no iterations);
-* ``admm-uv``, ``admm-st``, ``admm-uvst``: ``lfcl.methods.demosaic_lightfield`` with
+* ``malvar``, ``linear4d``: lfcl's OpenCL Malvar-He-Cutler and learned 4D filter (one
+  point each; no iterations);
+* ``admm-uv``, ``admm-st``, ``admm-uvst``, ... (any ADMM method, optionally ``NAME:START``,
+  e.g. ``admm-uv-xc:linear4d``): ``lfcl.methods.demosaic_lightfield`` with
   ``iterations=k`` (no early stop), the noise level from the capture's DNG noise
   profile as ``lfcl.evaluate.run_method`` does;
 * ``colour-demosaicing Malvar2004``: ``demosaicing_CFA_Bayer_Malvar2004`` on the
@@ -34,7 +36,7 @@ import numpy as np
 
 from ..evaluate import Capture, capture_in_memory, load_capture
 from ..layout import LightFieldShape, planes_to_exchange
-from ..methods import ADMM_DEFAULTS, admm_params, demosaic_lightfield
+from ..methods import ADMM_DEFAULTS, STARTS, admm_params, demosaic_lightfield
 from ..metrics import lightfield_scores
 from .timing import format_table, time_calls
 
@@ -123,9 +125,10 @@ def run(capture: Capture, budgets, reference_budgets=None, methods=ADMM_METHODS,
         raise ValueError(f"budgets must be positive integers, got {budgets}")
     if reference_budgets is None:
         reference_budgets = [b for b in budgets if b <= REFERENCE_MAX_BUDGET] or budgets[:1]
-    unknown = [m for m in methods if m not in ADMM_METHODS]
+    unknown = [m for m in methods if m.partition(":")[0] not in ADMM_METHODS or m.partition(":")[2] not in ("", *STARTS)]
     if unknown:
-        raise ValueError(f"unknown ADMM method(s) {', '.join(unknown)}: expected {', '.join(ADMM_METHODS)}")
+        raise ValueError(f"unknown ADMM method(s) {', '.join(unknown)}: expected {', '.join(ADMM_METHODS)}, "
+                         f"optionally NAME:START with START one of {', '.join(STARTS)}")
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     runtime = get_runtime(device)
@@ -137,16 +140,18 @@ def run(capture: Capture, budgets, reference_budgets=None, methods=ADMM_METHODS,
     def score(planes):
         return lightfield_scores(planes_to_exchange(np.asarray(planes, np.float32), shape), capture.truth)
 
-    def lfcl_method(method, iterations=None):
+    def lfcl_method(label, iterations=None):
+        method, _, start = label.partition(":")
         return demosaic_lightfield(mosaic, pattern, pitch, method, iterations=iterations,
-                                   noise=None if method == "malvar" else noise, device=device)
+                                   noise=None if method == "malvar" else noise, device=device, start=start or None)
 
     points = []
-    # lfcl Malvar: warm-up (program build), then timed
-    say("malvar")
-    lfcl_method("malvar")
-    seconds, result = _median_run(lambda: lfcl_method("malvar"), repeats)
-    points.append(_point("malvar", "lfcl OpenCL", 0, seconds, score(result.planes), result.stop_reason))
+    # the direct methods: warm-up (program build), then timed
+    for direct in ("malvar", "linear4d"):
+        say(direct)
+        lfcl_method(direct)
+        seconds, result = _median_run(lambda direct=direct: lfcl_method(direct), repeats)
+        points.append(_point(direct, "lfcl OpenCL", 0, seconds, score(result.planes), result.stop_reason))
 
     for method in methods:
         say(f"{method} warm-up")
