@@ -309,7 +309,7 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
 
     if fits and region_rows is None:
         result = solve(AdmmSolver(runtime, mosaic.shape, pattern, pitch, dims, origin), b, x0)
-        planes, runs = result.x.get(), [result]
+        planes, runs, band_rows = result.x.get(), [dataclasses.replace(result, x=None)], [H]
     elif dims == "uv":
         per_row = (solver_bytes((U, W), dims, exact=True, cross_channel=params.cross_channel),
                    solver_largest_buffer((U, W), dims))
@@ -320,15 +320,18 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         x0_host = x0.get()
         del b, x0
         planes, runs = np.empty_like(x0_host), []
-        solvers: dict = {}  # one solver per band height and Bayer row parity, reused
+        band_rows, solver, solver_key = [], None, None
         for s0, s1 in bands:
             rows = slice(s0 * U, s1 * U)
             key = (rows.stop - rows.start, (origin[0] + rows.start) % 2)
-            if key not in solvers:
-                solvers[key] = AdmmSolver(runtime, (key[0], W), pattern, pitch, dims, (origin[0] + rows.start, origin[1]))
-            result = solve(solvers[key], runtime.to_device(mosaic[rows]), runtime.to_device(x0_host[:, rows]))
+            if key != solver_key:  # one solver alive at a time: the budget is for one band's buffers
+                solver = None
+                solver, solver_key = AdmmSolver(runtime, (key[0], W), pattern, pitch, dims,
+                                                (origin[0] + rows.start, origin[1])), key
+            result = solve(solver, runtime.to_device(mosaic[rows]), runtime.to_device(x0_host[:, rows]))
             planes[:, rows] = result.x.get()
-            runs.append(result)
+            runs.append(dataclasses.replace(result, x=None))  # the band's planes are on the host now
+            band_rows.append(rows.stop - rows.start)
     else:
         raise ValueError(
             f"{method} on a {H}x{W} sensor needs about {needed / 2**30:.1f} GiB of device memory "
@@ -342,7 +345,7 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     counts = [run.iterations for run in runs]
     reason = runs[0].stop_reason if len(runs) == 1 else (
         f"{len(runs)} bands of lens rows, {min(counts)}-{max(counts)} iterations (mean over lens rows "
-        f"{np.average(counts, weights=[r.x.shape[1] for r in runs]):.1f}), each stopped by its own rule "
+        f"{np.average(counts, weights=band_rows):.1f}), each stopped by its own rule "
         f"(last band: {runs[-1].stop_reason})")
     parameters = dataclasses.asdict(params)
     parameters["start"] = start
