@@ -124,6 +124,9 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--lenses", default="64,160")
     parser.add_argument("--scenes", default="charts,deadleaves")
+    parser.add_argument("--lightfield", default=None, metavar="PATH",
+                        help="a rendered or decoded light field (HCI-layout folder or .npy, 9x9 views) to simulate "
+                             "raws from, instead of --scenes")
     parser.add_argument("--lux", default="2,12,50")
     parser.add_argument("--methods", default="admm-uv,admm-uv-xc")
     parser.add_argument("--fractions", default="0.1,0.2,0.3")
@@ -136,10 +139,10 @@ def main(argv=None):
     args = parser.parse_args(argv)
     out = []
     for lenses in (int(v) for v in args.lenses.split(",")):
-        for scene in args.scenes.split(","):
+        for scene in [args.lightfield] if args.lightfield else args.scenes.split(","):
             for lux in _floats(args.lux):
-                meta = {"scene": {"kind": "scene", "name": scene}, "lenses": [lenses] * 2, "pitch": [9, 9],
-                        "pattern": "GRBG", "seed": args.seed}
+                source = ({"kind": "lightfield", "path": scene} if args.lightfield else {"kind": "scene", "name": scene})
+                meta = {"scene": source, "lenses": [lenses] * 2, "pitch": [9, 9], "pattern": "GRBG", "seed": args.seed}
                 capture = capture_in_memory(meta, lux)
                 for method in args.methods.split(","):
                     if args.potential:
