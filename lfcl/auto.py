@@ -91,6 +91,20 @@ def replacement(choice: AutoChoice, why: str, method: str | None = None, strengt
     return ran, {"method": choice.method, "strength": choice.strength, "start": choice.start, "why": why}
 
 
+def for_pitch(choice: AutoChoice, pitch) -> tuple[AutoChoice, dict | None]:
+    """``choice`` and None if it runs on lenses of ``pitch``, else :func:`replacement`'s pair:
+    linear4d (as the method or the start) has coefficients for one pitch only."""
+    if "linear4d" not in (choice.method, choice.start):
+        return choice, None
+    from .ops.linear4d import load_model
+
+    fitted, pitch = tuple(load_model().pitch), tuple(int(p) for p in pitch)
+    if pitch == fitted:
+        return choice, None
+    why = f"linear4d has coefficients for {fitted[0]}x{fitted[1]} lenses only, not {pitch[0]}x{pitch[1]}"
+    return replacement(choice, why, *((AUTO_FALLBACK, 1.0) if choice.method == "linear4d" else ()))
+
+
 def choose(sigma: float, rule=None) -> AutoChoice:
     """The method and strength for noise level ``sigma``."""
     if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma >= 0):

@@ -230,19 +230,10 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     if start not in (None, *STARTS):
         raise ValueError(f"start must be one of {', '.join(STARTS)}, got {start!r}")
     if method == "auto":  # choose the method and strength from the noise level (lfcl/auto.py), then run it
-        from .auto import choose
+        from .auto import choose, for_pitch
 
         noise = noise if noise is not None else estimate_noise(mosaic, pattern, pitch, origin)
-        choice, replaced = choose(noise.sigma), None
-        if "linear4d" in (choice.method, choice.start):
-            from .auto import AUTO_FALLBACK, replacement
-            from .ops.linear4d import load_model
-
-            fitted = tuple(load_model().pitch)
-            if tuple(int(p) for p in pitch) != fitted:
-                why = f"linear4d has coefficients for {fitted[0]}x{fitted[1]} lenses only, not {U}x{V}"
-                choice, replaced = replacement(choice, why, *((AUTO_FALLBACK, 1.0) if choice.method == "linear4d"
-                                                              else ()))
+        choice, replaced = for_pitch(choose(noise.sigma), pitch)
         result = demosaic_lightfield(mosaic, pattern, pitch, choice.method, origin=origin, lam=lam,
                                      iterations=iterations, rho=rho, strength=strength * choice.strength,
                                      noise=noise, device=device, callback=callback, max_memory=max_memory,
