@@ -92,24 +92,6 @@ inline float16 neighbour(__global const float *plane, int d, int dir, int row, i
     if (r < 0 || r >= height) return (float16)0.0f;
     return load_row(plane + (size_t)r * width, col0, offset, width);
 }
-// D^T D x without the intermediate gradient: a 4D Laplacian with Neumann ends,
-//   (D^T D x)[i] = sum_d [has next] (x[i] - x[next]) + [has previous] (x[i] - x[previous]).
-inline float16 laplacian(__global const float *plane, float16 xi, int row, int col0, int height, int width)
-{
-    const int16 cols = lane_columns(col0);
-    float16 acc = (float16)0.0f;
-    #pragma unroll
-    for (int d = 1; d <= DIM_T; d <<= 1) {
-        if (!(DIMS & d)) continue;
-        #pragma unroll
-        for (int dir = -1; dir <= 1; dir += 2) {
-            const float16 other = neighbour(plane, d, dir, row, col0, height, width);
-            acc += select((float16)0.0f, xi - other, has_neighbour(d, dir, row, cols, height, width));
-        }
-    }
-    return acc;
-}
-
 // With dark pixels left out of the prior (docs/admm.md): lanes linked to their neighbour one
 // step along dim d (direction dir), i.e. the neighbour exists and both samples have a lens
 // weight > 0. Whether the two lens pixels are both lit repeats from lens to lens, so the host
@@ -123,9 +105,22 @@ inline int16 linked(__global const float *links, int d, int dir, int row, int16 
     return has_neighbour(d, dir, row, cols, height, width) & (lit != 0.0f);
 }
 
-// laplacian() over the linked pairs only: D^T M D x with M the mask of linked differences.
-inline float16 linked_laplacian(__global const float *links, __global const float *plane, float16 xi,
-                                int row, int col0, int height, int width)
+// PRIOR_MASK (build-time, 0 or 1): whether the prior's differences are masked by the lens
+// weights. LINK is then linked() with the kernel's `links` argument, else has_neighbour().
+#ifndef PRIOR_MASK
+#define PRIOR_MASK 0
+#endif
+#if PRIOR_MASK
+#define LINK(d, dir, row, cols, height, width) linked(links, d, dir, row, cols, height, width)
+#else
+#define LINK(d, dir, row, cols, height, width) has_neighbour(d, dir, row, cols, height, width)
+#endif
+
+// D^T M D x without the intermediate gradient: a 4D Laplacian with Neumann ends over the kept
+// differences (M: all of them without PRIOR_MASK, the linked ones with it),
+//   (D^T M D x)[i] = sum_d [next kept] (x[i] - x[next]) + [previous kept] (x[i] - x[previous]).
+inline float16 laplacian(__global const float *links, __global const float *plane, float16 xi,
+                         int row, int col0, int height, int width)
 {
     const int16 cols = lane_columns(col0);
     float16 acc = (float16)0.0f;
@@ -135,24 +130,12 @@ inline float16 linked_laplacian(__global const float *links, __global const floa
         #pragma unroll
         for (int dir = -1; dir <= 1; dir += 2) {
             const float16 other = neighbour(plane, d, dir, row, col0, height, width);
-            acc += select((float16)0.0f, xi - other, linked(links, d, dir, row, cols, height, width));
+            acc += select((float16)0.0f, xi - other, LINK(d, dir, row, cols, height, width));
         }
     }
     return acc;
 }
-
-// PRIOR_MASK (build-time, 0 or 1): whether the prior's differences are masked by the lens
-// weights. LINK is then linked() with the kernel's `links` argument, else has_neighbour().
-#ifndef PRIOR_MASK
-#define PRIOR_MASK 0
-#endif
-#if PRIOR_MASK
-#define LINK(d, dir, row, cols, height, width) linked(links, d, dir, row, cols, height, width)
-#define LAPLACIAN(plane, xi, row, col0, height, width) linked_laplacian(links, plane, xi, row, col0, height, width)
-#else
-#define LINK(d, dir, row, cols, height, width) has_neighbour(d, dir, row, cols, height, width)
-#define LAPLACIAN(plane, xi, row, col0, height, width) laplacian(plane, xi, row, col0, height, width)
-#endif
+#define LAPLACIAN(plane, xi, row, col0, height, width) laplacian(links, plane, xi, row, col0, height, width)
 #endif
 
 // Flat arrays are processed in chunks of 16 floats (one SIMD register on a CPU);
