@@ -186,6 +186,15 @@ def capture_in_memory(meta: dict, lux: float) -> Capture:
                    list(sim.sensor.noise_profile()) * 3)
 
 
+def simulated_capture(lenses: int, lux: float, seed: int = 0, scene: str = "charts",
+                      lightfield: str | None = None) -> Capture:
+    """A square capture of ``lenses`` x ``lenses`` 9x9 lenses (GRBG) of a built-in scene, or of a
+    rendered or decoded light field (``lightfield``: an HCI-layout folder or .npy), in memory."""
+    source = {"kind": "lightfield", "path": lightfield} if lightfield else {"kind": "scene", "name": scene}
+    meta = {"scene": source, "lenses": [lenses] * 2, "pitch": [9, 9], "pattern": "GRBG", "seed": seed}
+    return capture_in_memory(meta, lux)
+
+
 def centre_gradient_images(truth: np.ndarray) -> dict:
     """The centre view and |gradient| of the light field along each dim, at the centre view."""
     _, _, U, V, _ = truth.shape

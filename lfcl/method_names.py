@@ -4,3 +4,8 @@ What each does and its defaults: lfcl/methods.py.
 """
 
 METHODS = ("auto", "malvar", "admm-uv", "admm-st", "admm-uvst", "linear4d", "admm-uv-xc", "admm-uvst-xc")
+
+#: The methods whose prior couples no two lenses, so that flat lenses can leave the solve
+#: (lfcl/flat_lenses.py), and the chi-square p-value above which a lens counts as flat.
+SKIPPABLE = ("admm-uv", "admm-uv-xc")
+FLAT_P = 0.01

@@ -29,9 +29,11 @@ import time
 import numpy as np
 
 from .device import get_runtime
+from .flat_lenses import FLAT_P, SKIPPABLE, fill_flat, flat_lenses, pack_lenses
 from .flatfield import flat_field
 from .method_names import METHODS
 from .noise import NoiseEstimate, estimate_noise
+from .ops.flatlens import LensFlatness
 from .ops.malvar import Malvar
 from .ops.reduce import Reductions
 from .solvers.admm import AdmmSolver, solver_bytes, solver_largest_buffer
@@ -184,12 +186,51 @@ def freeze_settings_for(method: str, freeze) -> FreezeSettings | None:
     return settings or FreezeSettings(fraction=float(freeze))
 
 
+def flat_threshold_for(method: str, skip_flat) -> float | None:
+    """The p threshold ``demosaic_lightfield(skip_flat=...)`` tests lenses with (None: no test).
+
+    None: on (FLAT_P) for the methods whose prior couples no two lenses, off for the others;
+    True: FLAT_P; False: off; a number in (0, 1): that threshold.
+    """
+    if skip_flat is None:
+        return FLAT_P if method in SKIPPABLE else None
+    if skip_flat is False:
+        return None
+    if method not in SKIPPABLE:
+        raise ValueError(f"skipping flat lenses needs a prior that couples no two lenses ({', '.join(SKIPPABLE)}), "
+                         f"not {method}")
+    if skip_flat is True:
+        return FLAT_P
+    if not isinstance(skip_flat, (int, float)) or not 0 < skip_flat < 1:
+        raise ValueError(f"skip_flat must be True, False or a p threshold in (0, 1), got {skip_flat!r}")
+    return float(skip_flat)
+
+
+def _noise_for_flat_test(noise, raw_mosaic, pattern, pitch, origin, asked) -> tuple:
+    """(the noise model the flat-lens test uses, None) or (None, why there is none).
+
+    Without a usable model the test cannot run; if it was not ``asked`` for (the default) the
+    lenses are all solved and the outputs say why, if it was, that is an error.
+    """
+    why = None
+    if noise is None:
+        try:
+            noise = estimate_noise(raw_mosaic, pattern, pitch, origin)
+        except ValueError as e:
+            why = f"not tested: no noise model ({e})"
+    if why is None and not all(math.isfinite(v) and 0 <= v < 1e30 for v in (noise.gain, noise.floor)):
+        why = f"not tested: the noise model (gain {noise.gain:.3g}, floor {noise.floor:.3g}) is out of range"
+    if why is not None and asked is not None:
+        raise ValueError(f"skipping flat lenses: {why.removeprefix('not tested: ')}")
+    return (None, why) if why is not None else (noise, None)
+
+
 def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
                         lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
                         device=None, callback=None, max_memory: int | None = None,
                         lens_response=None, region_rows: int | None = None,
                         tolerance_db: float | None = None, freeze: bool | float | FreezeSettings | None = None,
-                        start: str | None = None) -> DemosaicResult:
+                        start: str | None = None, skip_flat: bool | float | None = None) -> DemosaicResult:
     """Demosaic (and denoise) a normalised lenslet mosaic [H, W] into [3, H, W] planes.
 
     H and W must be whole multiples of the pitch (crop first). ``noise`` defaults to
@@ -217,6 +258,11 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     default) or ``"linear4d"`` (the learned 4D filter, which also reads the neighbouring
     lenses: measured in docs/auto.md, it gains on textured and multi-plane scenes and
     loses on large flat in-focus patches). ``auto`` takes the start its rule names.
+    ``skip_flat`` (admm-uv, admm-uv-xc): lenses that are flat within the noise (a chi-square
+    test, lfcl/flat_lenses.py) get their colour means and the solve runs on the others only,
+    packed into a smaller mosaic; None: on for those methods at p threshold FLAT_P, True:
+    the same, False: off, a number: that p threshold. Recorded in ``parameters["flat_lenses"]``;
+    ``callback``'s x is then the packed mosaic's.
     """
     method = parse_method(method)
     mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
@@ -240,11 +286,13 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
                                      lens_response=lens_response, region_rows=region_rows,
                                      tolerance_db=tolerance_db,
                                      freeze=freeze if choice.method in FREEZABLE else None,
-                                     start=start if start is not None else choice.start)
+                                     start=start if start is not None else choice.start,
+                                     skip_flat=skip_flat if choice.method in SKIPPABLE else None)
         result.parameters = {**result.parameters, "auto": {**choice.as_dict(),
                                                            **({"replaced": replaced} if replaced else {})}}
         return result
     freeze_settings = freeze_settings_for(method, freeze)
+    flat_threshold = flat_threshold_for(method, skip_flat)
     raw_mosaic, lens_weights = mosaic, None
     if lens_response is not None:
         mosaic, lens_weights = flat_field(mosaic, lens_response)
@@ -280,6 +328,24 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     params = admm_params(method, sigma, lam=lam, iterations=iterations, rho=rho, strength=strength,
                          tolerance_db=tolerance_db)
     dims = ADMM_DEFAULTS[method].dims
+    found, packing, real, full_shape = None, None, None, (3, *mosaic.shape)
+    flat_noise, flat_why = None, "not tested (skip_flat off)"
+    if flat_threshold is not None:
+        flat_noise, flat_why = _noise_for_flat_test(noise, raw_mosaic, pattern, pitch, origin, asked=skip_flat)
+        noise = noise if noise is not None else flat_noise
+    if flat_noise is not None:  # flat lenses get their colour means and leave the solve (lfcl/flat_lenses.py)
+        statistics = LensFlatness(runtime, mosaic.shape, pattern, pitch, origin)(b, lens_weights, flat_noise.gain,
+                                                                                 flat_noise.floor)
+        found = flat_lenses(mosaic, pattern, pitch, flat_noise, origin=origin, lens_weights=lens_weights,
+                            threshold=flat_threshold, statistics=statistics)
+        if found.flat.any():
+            packing = pack_lenses(~found.flat)
+            real = packing.real
+            x0_host = x0.get()
+            del b, x0  # the full-size start and mosaic leave the device before the packed solver comes
+            mosaic = packing.pack(mosaic, pitch)
+            x0_packed = packing.pack(x0_host, pitch)
+            b, x0 = runtime.to_device(mosaic), runtime.to_device(x0_packed)
     H, W = mosaic.shape
     if region_rows is not None and (dims != "uv" or int(region_rows) < 1):
         raise ValueError(f"region_rows needs admm-uv and a whole number of lens rows >= 1, got {method} "
@@ -290,16 +356,27 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     fits = needed <= budget and largest <= runtime.device.max_mem_alloc_size
     freeze_reports = []
 
-    def solve(solver, b, x0):
+    def samples_in(rows: slice) -> int | None:
+        """The samples the stop rule's rms change is over, for these sensor rows (None: all of x).
+
+        Packed: the solved lenses' samples, not the padding's. The flat lenses are final and are
+        not counted either: counted with change 0 they stopped the busy lenses early, at up to
+        0.4 dB below the plain solve (docs/auto.md).
+        """
+        return None if real is None else int(real[rows.start // U:rows.stop // U].sum()) * 3 * U * V
+
+    def solve(solver, b, x0, samples):
         if freeze_settings is None:
-            return solver.solve(b, x0, params, callback=callback, lens_weights=lens_weights)
+            return solver.solve(b, x0, params, callback=callback, lens_weights=lens_weights, samples=samples)
         result, report = solve_with_freezing(solver, b, x0, params, freeze_settings, callback=callback,
-                                             lens_weights=lens_weights)
+                                             lens_weights=lens_weights, samples=samples)
         freeze_reports.append(report)
         return result
 
-    if fits and region_rows is None:
-        result = solve(AdmmSolver(runtime, mosaic.shape, pattern, pitch, dims, origin), b, x0)
+    if real is not None and not real.any():  # every lens is flat: nothing to solve
+        planes, runs, band_rows = np.zeros((3, H, W), np.float32), [], []
+    elif fits and region_rows is None:
+        result = solve(AdmmSolver(runtime, mosaic.shape, pattern, pitch, dims, origin), b, x0, samples_in(slice(0, H)))
         planes, runs, band_rows = result.x.get(), [dataclasses.replace(result, x=None)], [H]
     elif dims == "uv":
         per_row = (solver_bytes((U, W), dims, exact=True, cross_channel=params.cross_channel),
@@ -310,16 +387,19 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
             bands = [(s0, min(s0 + step, H // U)) for s0 in range(0, H // U, step)]
         x0_host = x0.get()
         del b, x0
-        planes, runs = np.empty_like(x0_host), []
+        planes, runs = np.zeros_like(x0_host), []
         band_rows, solver, solver_key = [], None, None
         for s0, s1 in bands:
             rows = slice(s0 * U, s1 * U)
+            if samples_in(rows) == 0:  # padding rows of a packed mosaic
+                continue
             key = (rows.stop - rows.start, (origin[0] + rows.start) % 2)
             if key != solver_key:  # one solver alive at a time: the budget is for one band's buffers
                 solver = None
                 solver, solver_key = AdmmSolver(runtime, (key[0], W), pattern, pitch, dims,
                                                 (origin[0] + rows.start, origin[1])), key
-            result = solve(solver, runtime.to_device(mosaic[rows]), runtime.to_device(x0_host[:, rows]))
+            result = solve(solver, runtime.to_device(mosaic[rows]), runtime.to_device(x0_host[:, rows]),
+                           samples_in(rows))
             planes[:, rows] = result.x.get()
             runs.append(dataclasses.replace(result, x=None))  # the band's planes are on the host now
             band_rows.append(rows.stop - rows.start)
@@ -330,20 +410,27 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
             f"(max allocation {runtime.device.max_mem_alloc_size / 2**30:.1f} GiB); its prior couples "
             "neighbouring lenses, so it does not run in bands: use admm-uv, a crop, or a larger device"
         )
+    if packing is not None:  # the solved lenses back to their places, the flat ones to their means
+        planes = fill_flat(packing.unpack(planes, np.empty(full_shape, np.float32), pitch), found, pitch)
     if not np.all(np.isfinite(planes)):
         raise FloatingPointError(f"{method} produced NaN/Inf values; try a smaller lambda or rho")
     history = [dict(dataclasses.asdict(r), band=i) for i, run in enumerate(runs) for r in run.history]
     counts = [run.iterations for run in runs]
-    reason = runs[0].stop_reason if len(runs) == 1 else (
+    reason = "every lens is flat: no iterations" if not runs else runs[0].stop_reason if len(runs) == 1 else (
         f"{len(runs)} bands of lens rows, {min(counts)}-{max(counts)} iterations (mean over lens rows "
         f"{np.average(counts, weights=band_rows):.1f}), each stopped by its own rule "
         f"(last band: {runs[-1].stop_reason})")
     parameters = dataclasses.asdict(params)
     parameters["start"] = start
+    if found is not None:
+        parameters["flat_lenses"] = {**found.as_dict(), "solved_lens_rows": int(real.shape[0]) if real is not None
+                                     else found.flat.shape[0], "sensor_lens_rows": found.flat.shape[0]}
+    elif dims == "uv":
+        parameters["flat_lenses"] = {"flat_lenses": 0, "why": flat_why}
     if freeze_reports:
         parameters["freeze"] = {**combine_reports(freeze_reports), "fraction": freeze_settings.fraction,
                                 "shrink_at": freeze_settings.shrink_at}
     return DemosaicResult(
-        planes, method, parameters, max(run.iterations for run in runs), time.perf_counter() - began,
+        planes, method, parameters, max((run.iterations for run in runs), default=0), time.perf_counter() - began,
         reason, history, noise,
     )

@@ -243,6 +243,9 @@ class Demosaic:
     admm-uv problem on an aligned grid runs in bands of lens rows).
     ``start``: the ADMM methods' first estimate (``lfcl.methods.STARTS``; aligned grids only), None:
     the method's (Malvar; ``auto``: the one its rule names).
+    ``skip_flat``: leave lenses that are flat within the noise out of the solve and give them their
+    colour means (lfcl/flat_lenses.py; admm-uv, admm-uv-xc, aligned grids); None: on for those methods,
+    False: off, True or a p threshold in (0, 1): on.
     ``device``: an OpenCL device spec or None (``LFCL_DEVICE``, else the first device).
     ``callback(record, x)``: called after every ADMM iteration (progress bars)."""
 
@@ -250,8 +253,9 @@ class Demosaic:
 
     def __init__(self, method: str = "admm-uv", lam: float | None = None, iterations: int | None = None,
                  strength: float = 1.0, device=None, callback=None, max_memory: int | None = None,
-                 tolerance_db: float | None = None, start: str | None = None):
-        from .methods import STARTS, parse_method
+                 tolerance_db: float | None = None, start: str | None = None,
+                 skip_flat: bool | float | None = None):
+        from .methods import STARTS, flat_threshold_for, parse_method
 
         try:
             self.method = parse_method(method)
@@ -274,13 +278,19 @@ class Demosaic:
         if start is not None and start not in STARTS:
             raise ValueError(f"Demosaic: start must be one of {', '.join(STARTS)} or None, got {start!r}")
         self.start = start
+        try:  # auto passes it on to the method it picks, so check the value as for admm-uv
+            flat_threshold_for("admm-uv" if self.method == "auto" else self.method, skip_flat)
+        except ValueError as e:
+            raise ValueError(f"Demosaic: {e}") from None
+        self.skip_flat = skip_flat
         self.lam, self.iterations, self.strength = lam, iterations, float(strength)
         self.max_memory = None if max_memory is None else int(max_memory)
         self.device, self.callback = device, callback
 
     def options(self) -> dict:
         return {"method": self.method, "lambda": self.lam, "iterations": self.iterations, "strength": self.strength,
-                "tolerance_db": self.tolerance_db, "max_memory": self.max_memory, "start": self.start}
+                "tolerance_db": self.tolerance_db, "max_memory": self.max_memory, "start": self.start,
+                "skip_flat": self.skip_flat}
 
     def __call__(self, gridded: Gridded) -> Demosaiced:
         _need(gridded, Gridded, "Demosaic", "a Gridded (from Grid)")
@@ -307,6 +317,9 @@ class Demosaic:
             if self.start not in (None, "malvar"):
                 raise ValueError(f"Demosaic: start {self.start} needs an aligned square lens grid; this one is "
                                  f"{grid_words(gridded.metadata['geometry'])} (use the default start)")
+            if self.skip_flat not in (None, False):
+                raise ValueError("Demosaic: skipping flat lenses needs an aligned square lens grid; this one is "
+                                 f"{grid_words(gridded.metadata['geometry'])} (leave skip_flat out)")
             result = demosaic_resampled(gridded.data, mosaic.pattern, gridded.sampling, self.method, lam=self.lam,
                                         iterations=self.iterations, strength=self.strength, noise=noise,
                                         device=self.device, callback=self.callback, max_memory=self.max_memory,
@@ -321,7 +334,8 @@ class Demosaic:
                                          lam=self.lam, iterations=self.iterations, strength=self.strength,
                                          noise=noise, device=self.device, callback=self.callback,
                                          lens_response=gridded.lens_response, max_memory=self.max_memory,
-                                         tolerance_db=self.tolerance_db, start=self.start)
+                                         tolerance_db=self.tolerance_db, start=self.start,
+                                         skip_flat=self.skip_flat)
             S, T = gridded.lenses
             lightfield = planes_to_exchange(result.planes, LightFieldShape(S, T, P, P))
         meta = {
@@ -404,6 +418,12 @@ class Outputs:
         seconds: dict = {}
         paths = self.write(plan, out_dir, seconds=seconds)
         return Written(paths, plan, seconds)
+
+
+def _skipped_flat(record) -> list:
+    from .flat_lenses import skipped_flat_lenses  # scipy.stats: not at import (lfcl --help)
+
+    return skipped_flat_lenses(record)
 
 
 def _skipped(plan, outputs: list) -> list:
@@ -497,7 +517,8 @@ class Pipeline:
         summary.update({"format": plan.image_format, "previews": plan.previews, "colour": plan.colour,
                         "outputs": [f.name for f in plan.files], "refocus": plan.refocus,
                         "skipped": _skipped(plan, outputs.outputs)
-                        + skipped_by_auto(demosaiced.metadata["parameters"].get("auto"))})
+                        + skipped_by_auto(demosaiced.metadata["parameters"].get("auto"))
+                        + _skipped_flat(demosaiced.metadata["parameters"].get("flat_lenses"))})
         write: dict = {}
 
         def final() -> dict:  # called when summary.json is written (last), and after

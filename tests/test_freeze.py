@@ -223,8 +223,9 @@ def test_demosaic_lightfield_freeze_option(rng):
 
     b, _ = half_flat_mosaic(rng)
     noise = NoiseEstimate(0.0, 0.01**2, 0.01, "test")
-    plain = demosaic_lightfield(b, "GRBG", PITCH, "admm-uv", noise=noise, freeze=False)
-    frozen = demosaic_lightfield(b, "GRBG", PITCH, "admm-uv", noise=noise, freeze=0.3)
+    # every lens solved: leaving the flat half out (skip_flat, the default) would leave nothing to freeze
+    plain = demosaic_lightfield(b, "GRBG", PITCH, "admm-uv", noise=noise, freeze=False, skip_flat=False)
+    frozen = demosaic_lightfield(b, "GRBG", PITCH, "admm-uv", noise=noise, freeze=0.3, skip_flat=False)
     assert "freeze" not in plain.parameters
     record = frozen.parameters["freeze"]
     json.dumps(record)  # goes into the outputs' metadata

@@ -32,7 +32,8 @@ def textured_mosaic():
 def test_linear4d_start_is_admm_from_the_linear4d_planes(runtime, textured_mosaic):
     """With a fixed budget, start="linear4d" is the float64 reference ADMM run from linear4d's output."""
     b = textured_mosaic
-    got = demosaic_lightfield(b, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=6, start="linear4d")
+    got = demosaic_lightfield(b, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=6, start="linear4d",
+                              skip_flat=False)  # every lens solved, as the reference does
     x0 = linear4d(runtime, b, "GRBG", (9, 9), (0, 0), NOISE).astype(np.float64)
     # the device's x-update is the exact per-lens solve: the reference gets CG run to convergence
     reference_params = dataclasses.replace(

@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from ..evaluate import capture_in_memory
+from ..evaluate import simulated_capture
 from ..imageio import write_json
 from ..layout import LightFieldShape, planes_to_exchange
 from ..methods import demosaic_lightfield
@@ -141,9 +141,7 @@ def main(argv=None):
     for lenses in (int(v) for v in args.lenses.split(",")):
         for scene in [args.lightfield] if args.lightfield else args.scenes.split(","):
             for lux in _floats(args.lux):
-                source = ({"kind": "lightfield", "path": scene} if args.lightfield else {"kind": "scene", "name": scene})
-                meta = {"scene": source, "lenses": [lenses] * 2, "pitch": [9, 9], "pattern": "GRBG", "seed": args.seed}
-                capture = capture_in_memory(meta, lux)
+                capture = simulated_capture(lenses, lux, args.seed, scene, args.lightfield)
                 for method in args.methods.split(","):
                     if args.potential:
                         row = {"lenses": lenses, "scene": scene, "lux": lux, "method": method,

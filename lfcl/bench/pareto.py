@@ -108,12 +108,14 @@ def mark_front(points: list[dict], key: str = "psnr_center", tolerance_db: float
 
 
 def run(capture: Capture, budgets, reference_budgets=None, methods=ADMM_METHODS, repeats: int = 1,
-        device=None, progress=None) -> dict:
+        device=None, progress=None, skip_flat: bool | None = None) -> dict:
     """Every (method, budget) point and the peers on ``capture``; a JSON-ready dict.
 
     ``reference_budgets``: budgets for the numpy reference ADMM (None: those of
     ``budgets`` up to 10; empty: skip it). ``progress(label)`` is called before
-    each point.
+    each point. ``skip_flat``: as ``demosaic_lightfield``'s (None: each method's default,
+    which for admm-uv and admm-uv-xc leaves flat lenses out; False: every lens solved,
+    like the numpy reference).
     """
     from ..device import get_runtime
     from ..ops.malvar import malvar_np
@@ -143,7 +145,8 @@ def run(capture: Capture, budgets, reference_budgets=None, methods=ADMM_METHODS,
     def lfcl_method(label, iterations=None):
         method, _, start = label.partition(":")
         return demosaic_lightfield(mosaic, pattern, pitch, method, iterations=iterations,
-                                   noise=None if method == "malvar" else noise, device=device, start=start or None)
+                                   noise=None if method == "malvar" else noise, device=device, start=start or None,
+                                   skip_flat=skip_flat if iterations is not None else None)
 
     points = []
     # the direct methods: warm-up (program build), then timed
@@ -192,6 +195,7 @@ def run(capture: Capture, budgets, reference_budgets=None, methods=ADMM_METHODS,
         "noise_sigma": noise.sigma,
         "budgets": budgets,
         "reference_budgets": list(reference_budgets),
+        "skip_flat": skip_flat,
         "repeats": repeats,
         "points": points,
     }

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import click
 
-from ..method_names import METHODS
+from ..method_names import FLAT_P, METHODS
 from . import device_option, user_errors
 
 DEFAULT_OUTPUTS = "center,mean,lightfield"
@@ -68,6 +68,13 @@ _OPTIONS = (
                  help="First estimate of the ADMM methods: malvar (the paper's) or linear4d (the learned 4D "
                       "filter; gains on textured and multi-plane scenes, docs/auto.md). Default: malvar; "
                       "with --method auto, the start its rule names."),
+    click.option("--skip-flat/--solve-flat", "skip_flat", default=None,
+                 help="Flat lenses (constant per colour within the noise: a chi-square test against the raw's "
+                      "noise model) get their colour means and leave the ADMM solve (admm-uv, admm-uv-xc, auto's "
+                      "picks; docs/auto.md). Default: skip, for those methods."),
+    click.option("--flat-p", "flat_p", default=None, type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
+                 metavar="P",
+                 help=f"A lens is flat when its chi-square p-value is above P (default {FLAT_P:g}); implies --skip-flat."),
     click.option("--max-memory", default=None, type=click.FloatRange(min=0.01), metavar="GIB",
                  help="Device memory the solver may use, GiB; default 80% of the device's. A larger admm-uv "
                       "problem runs in bands of lens rows (exact: the (u, v) prior couples no two lenses)."),
@@ -118,6 +125,7 @@ class ProcessSettings:
     recipe: dict | None = None
     tolerance_db: float | None = None
     start: str | None = None
+    skip_flat: bool | float | None = None
 
     def pipeline(self, callback=None):
         """The :class:`lfcl.stages.Pipeline` of these settings; ``callback``: per ADMM iteration (progress)."""
@@ -132,7 +140,7 @@ class ProcessSettings:
             Grid(pitch=self.pitch, calibration=self.calibration, white=self.white, pattern=self.pattern),
             Demosaic(self.method, lam=self.lam, iterations=self.iterations, strength=self.strength,
                      device=self.device, callback=callback, max_memory=self.max_memory,
-                     tolerance_db=self.tolerance_db, start=self.start),
+                     tolerance_db=self.tolerance_db, start=self.start, skip_flat=self.skip_flat),
             Outputs(list(self.outputs), refocus=self.refocus or DEFAULT_REFOCUS, fmt=self.fmt,
                     previews=self.previews, metadata=extra),
         ])
@@ -201,13 +209,19 @@ def settings_from_options(options: dict, ctx: click.Context | None = None) -> Pr
     if calibration is not None:
         _check_method_for_calibration(method, calibration, options.get("start"))
     max_memory, tolerance_db = options["max_memory"], options.get("tolerance_db")
+    skip_flat, flat_p = options.get("skip_flat"), options.get("flat_p")
+    if flat_p is not None:
+        if skip_flat is False:
+            raise ValueError("--flat-p sets how flat lenses are skipped: it does not go with --solve-flat")
+        skip_flat = float(flat_p)
     settings = ProcessSettings(
         method=method, pitch=pitch, calibration=None if calibration is None else str(calibration),
         white=None if white is None else str(white), pattern=options["pattern"], outputs=tuple(wanted),
         refocus=refocus_spec, fmt=fmt, previews=bool(previews), lam=lam, iterations=iterations,
         strength=float(strength), max_memory=None if max_memory is None else int(max_memory * 2**30),
         device=options["device"], recipe=recipe_meta,
-        tolerance_db=None if tolerance_db is None else float(tolerance_db), start=options.get("start"))
+        tolerance_db=None if tolerance_db is None else float(tolerance_db), start=options.get("start"),
+        skip_flat=skip_flat)
     settings.pipeline()  # the stages check the rest (--strength, --lambda, ...), still before any work
     return settings
 

@@ -176,7 +176,8 @@ class OutsideSums:
     """The history's sums over a set of lenses: what lenses solved outside a solver (frozen,
     lfcl/solvers/freeze.py) add to its records so that they stay the whole problem's.
 
-    samples: the whole problem's sample count (the rms change is over all of them);
+    samples: the whole problem's sample count (the rms change is over all of them; a packed
+             problem's padding lenses, lfcl/flat_lenses.py, are not counted);
     misfit2 = ||W^(1/2) (A x - b)||^2, prior = lam ||M D x||_1 (+ lam_xc ||M D C x||_1),
     primal2 = ||K x - z||^2, change2 = ||x_k - x_k-1||^2, all of the iteration they froze at.
     Their z no longer moves, so they add nothing to the dual residual; their change is kept at
@@ -501,13 +502,16 @@ class AdmmSolver:
             primal2 += cross[1]
         return OutsideSums(samples=x.size, misfit2=misfit2, prior=prior, primal2=primal2)
 
-    def solve(self, b, x0, params: AdmmParams, callback=None, lens_weights=None) -> AdmmResult:
+    def solve(self, b, x0, params: AdmmParams, callback=None, lens_weights=None, samples: int | None = None
+              ) -> AdmmResult:
         """Run ADMM on mosaic ``b`` [H, W] from ``x0`` [3, H, W] (both float32 device arrays).
 
         ``x0`` is not modified; the result's ``x`` is a new device array.
         ``callback(record, x)`` is called after every iteration (progress bars,
         parameter sweeps); ``x`` is the current device array, not to be modified.
         ``lens_weights`` [U, V]: see :meth:`set_lens_weights`.
+        ``samples``: the samples the rms change is taken over (default all of x; a packed
+        mosaic's zero padding lenses, lfcl/flat_lenses.py, are left out of it).
         """
         self.set_lens_weights(lens_weights)
         check_device_array(b, (self.height, self.width), "b")
@@ -516,7 +520,8 @@ class AdmmSolver:
         x = x0.copy()
         self.start(x)
         history: list[IterationRecord] = []
-        reason = self.iterate(b, x, params, history, callback=callback)
+        outside = OutsideSums(samples=samples if samples is not None else x.size)
+        reason = self.iterate(b, x, params, history, callback=callback, outside=outside)
         self.finish(x)
         return AdmmResult(x=x, history=history, stop_reason=reason)
 

@@ -181,10 +181,10 @@ def block_rms_change(change2: np.ndarray, solver: AdmmSolver, block_lenses: np.n
 
 
 def solve_with_freezing(solver: AdmmSolver, b, x0, params: AdmmParams, settings: FreezeSettings,
-                        callback=None, lens_weights=None) -> tuple[AdmmResult, FreezeReport]:
+                        callback=None, lens_weights=None, samples: int | None = None) -> tuple[AdmmResult, FreezeReport]:
     """:meth:`AdmmSolver.solve` that freezes converged blocks of lenses (module docstring).
 
-    Same arguments and result as ``solver.solve``; ``callback(record, x)`` gets the current
+    Same arguments (``samples`` too) and result as ``solver.solve``; ``callback(record, x)`` gets the current
     solver's x (after a move, the lenses still changing, in blocks, padded with zeros).
     Where freezing does not apply (:func:`why_not_frozen`) this is ``solver.solve``.
     """
@@ -196,7 +196,7 @@ def solve_with_freezing(solver: AdmmSolver, b, x0, params: AdmmParams, settings:
     S, T = solver.height // U, solver.width // V
     why = why_not_frozen(solver, params, settings)
     if why is not None:
-        result = solver.solve(b, x0, params, callback=callback, lens_weights=lens_weights)
+        result = solver.solve(b, x0, params, callback=callback, lens_weights=lens_weights, samples=samples)
         return result, FreezeReport(False, why, S * T, iterations=result.iterations,
                                     slot_iterations=S * T * result.iterations)
     runtime, copy = solver.runtime, LensCopy(solver.runtime, (U, V))
@@ -206,7 +206,7 @@ def solve_with_freezing(solver: AdmmSolver, b, x0, params: AdmmParams, settings:
     lens_map[:S, :T] = np.arange(S * T).reshape(S, T)
     stage = _Stage(solver, x_full, b, lens_map)
     history: list[IterationRecord] = []
-    outside = OutsideSums(samples=x_full.size)
+    outside = OutsideSums(samples=samples if samples is not None else x_full.size)
     report = FreezeReport(True, f"blocks of {BLOCK[0]}x{BLOCK[1]} lenses below {settings.fraction:g} x change_tol",
                           S * T)
     report.frozen_at = np.zeros((S, T), np.int64)
