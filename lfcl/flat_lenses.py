@@ -56,11 +56,22 @@ class FlatLenses:
     def share(self) -> float:
         return float(self.flat.mean()) if self.flat.size else 0.0
 
-    def as_dict(self) -> dict:
-        """For the outputs' metadata: the counts and the rule, not the per-lens maps."""
-        return {"p_threshold": self.threshold, "flat_lenses": int(self.flat.sum()), "lenses": int(self.flat.size),
-                "share": self.share,
-                "why": f"flat within the noise, chi-square p > {self.threshold:g}: each takes its colour means"}
+    def as_dict(self, solved_rows: int | None = None) -> dict:
+        """For the outputs' metadata: the counts and the rule, not the per-lens maps.
+
+        ``solved_rows``: the packed solver's lens rows, or None when the flat lenses were too
+        few to shrink the solve (then every lens was solved and ``flat_lenses`` is 0).
+        """
+        S, found = self.flat.shape[0], int(self.flat.sum())
+        rule = f"flat within the noise, chi-square p > {self.threshold:g}"
+        if solved_rows is None:
+            why = (f"{found} lenses {rule}, too few to shrink the solve: every lens solved" if found
+                   else f"no lens {rule}")
+        else:
+            why = f"{rule}: each takes its colour means"
+        return {"p_threshold": self.threshold, "found": found, "flat_lenses": found if solved_rows is not None else 0,
+                "lenses": int(self.flat.size), "share": self.share, "why": why,
+                "solved_lens_rows": solved_rows if solved_rows is not None else S, "sensor_lens_rows": S}
 
 
 def flat_lenses(mosaic: np.ndarray, pattern: str, pitch, noise: NoiseEstimate, *, origin=(0, 0),
@@ -109,6 +120,14 @@ class LensPacking:
         mask = np.zeros(self.grid, bool)
         mask.flat[self.target] = True
         return mask
+
+    def pairs(self) -> np.ndarray:
+        """(full-grid lens or -1 for zeros, packed lens) for every packed lens: the table of
+        lfcl/ops/lenscopy.py, which packs device arrays as :meth:`pack` packs host ones."""
+        pairs = np.full((self.grid[0] * self.grid[1], 2), -1, np.int64)
+        pairs[:, 1] = np.arange(len(pairs))
+        pairs[self.target, 0] = self.source
+        return pairs
 
     def pack(self, array: np.ndarray, pitch) -> np.ndarray:
         """``array`` [..., S*U, T*V] -> [..., S'*U, T*V]: the packed lenses, zeros in the padding."""

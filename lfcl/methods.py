@@ -34,6 +34,7 @@ from .flatfield import flat_field
 from .method_names import METHODS
 from .noise import NoiseEstimate, estimate_noise
 from .ops.flatlens import LensFlatness
+from .ops.lenscopy import LensCopy
 from .ops.malvar import Malvar
 from .ops.reduce import Reductions
 from .solvers.admm import AdmmSolver, solver_bytes, solver_largest_buffer
@@ -338,14 +339,16 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
                                                                                  flat_noise.floor)
         found = flat_lenses(mosaic, pattern, pitch, flat_noise, origin=origin, lens_weights=lens_weights,
                             threshold=flat_threshold, statistics=statistics)
-        if found.flat.any():
-            packing = pack_lenses(~found.flat)
+        packing = pack_lenses(~found.flat) if found.flat.any() else None
+        if packing is not None and packing.grid[0] == packing.full[0]:
+            packing = None  # too few to shrink the solver: packing, filling and a new size would only cost
+        if packing is not None:  # the lenses still to solve, side by side, on the device
             real = packing.real
-            x0_host = x0.get()
-            del b, x0  # the full-size start and mosaic leave the device before the packed solver comes
+            copy = LensCopy(runtime, pitch)
+            table = copy.upload(packing.pairs())
             mosaic = packing.pack(mosaic, pitch)
-            x0_packed = packing.pack(x0_host, pitch)
-            b, x0 = runtime.to_device(mosaic), runtime.to_device(x0_packed)
+            b = copy(b, runtime.empty(mosaic.shape), table)
+            x0 = copy(x0, runtime.empty((3, *mosaic.shape)), table)
     H, W = mosaic.shape
     if region_rows is not None and (dims != "uv" or int(region_rows) < 1):
         raise ValueError(f"region_rows needs admm-uv and a whole number of lens rows >= 1, got {method} "
@@ -423,8 +426,7 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     parameters = dataclasses.asdict(params)
     parameters["start"] = start
     if found is not None:
-        parameters["flat_lenses"] = {**found.as_dict(), "solved_lens_rows": int(real.shape[0]) if real is not None
-                                     else found.flat.shape[0], "sensor_lens_rows": found.flat.shape[0]}
+        parameters["flat_lenses"] = found.as_dict(packing.grid[0] if packing is not None else None)
     elif dims == "uv":
         parameters["flat_lenses"] = {"flat_lenses": 0, "why": flat_why}
     if freeze_reports:

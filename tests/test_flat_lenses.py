@@ -28,16 +28,18 @@ def noisy(clean: np.ndarray, seed: int) -> np.ndarray:
     return (clean + np.sqrt(GAIN * np.maximum(clean, 0) + FLOOR) * rng.standard_normal(clean.shape)).astype(np.float32)
 
 
-def lens_mosaic(lenses, pattern="GRBG", pitch=(9, 9), edge_every=2, seed=0, contrast=0.2):
+def lens_mosaic(lenses, pattern="GRBG", pitch=(9, 9), edge_every=2, seed=0, contrast=0.2, edged=None):
     """A mosaic of lenses that are constant per colour (random levels), every ``edge_every``-th lens
-    with a vertical edge of ``contrast`` through it; returns (noisy mosaic, [S, T] bool: has an edge)."""
+    (or those of the [S, T] mask ``edged``) with a vertical edge of ``contrast`` through it;
+    returns (noisy mosaic, [S, T] bool: has an edge)."""
     S, T = lenses
     U, V = pitch
     rng = np.random.default_rng(seed)
     levels = rng.uniform(0.1, 0.7, (S, T, 3))
     channels = channel_map((S * U, T * V), pattern)
     clean = np.take_along_axis(np.repeat(np.repeat(levels, U, 0), V, 1), channels[..., None], axis=-1)[..., 0]
-    edged = (np.arange(S * T).reshape(S, T) % edge_every) == 0 if edge_every else np.zeros((S, T), bool)
+    if edged is None:
+        edged = (np.arange(S * T).reshape(S, T) % edge_every) == 0 if edge_every else np.zeros((S, T), bool)
     step = np.zeros((U, V))
     step[:, V // 2:] = contrast
     clean = clean + np.kron(edged, step)
@@ -120,8 +122,11 @@ def test_fill_flat_sets_every_pixel_of_a_flat_lens():
 
 @pytest.fixture(scope="module")
 def mixed():
-    """4x6 lenses: flat ones and ones with an edge."""
-    return lens_mosaic((4, 6), edge_every=2, seed=3)
+    """4x6 lenses: lens rows 0 and 1 with edges in every other lens, the rest flat (so that the
+    busy lenses fit in fewer lens rows)."""
+    edged = np.zeros((4, 6), bool)
+    edged[:2, ::2] = edged[1, 3] = True
+    return lens_mosaic((4, 6), seed=3, edged=edged)
 
 
 def test_fixed_budget_solve_is_the_reference_on_the_busy_lenses(mixed):
@@ -214,7 +219,7 @@ def test_the_coupled_priors_solve_every_lens_by_default(mixed):
 
 def test_process_reports_the_skipped_lenses(tmp_path):
     capture = tmp_path / "cap"
-    result = CliRunner().invoke(cli, ["simulate", "--scene", "charts", "--lenses", "8x8", "--lux", "12",
+    result = CliRunner().invoke(cli, ["simulate", "--scene", "charts", "--lenses", "16x16", "--lux", "12",
                                       "--seed", "1", "-o", str(capture)])
     assert result.exit_code == 0, result.output
     base = ["process", str(capture / "raw.dng"), "--pitch", "9", "--method", "admm-uv", "--outputs", "center",
@@ -262,3 +267,13 @@ def test_the_benchmark_writes_one_row_per_capture_and_method(tmp_path):
         assert row["speedup"] == pytest.approx(row["seconds_solve"] / row["seconds_skip"])
         assert row["gain_center"] == pytest.approx(row["psnr_center_skip"] - row["psnr_center_solve"])
         assert 1 <= row["solved_lens_rows"] <= row["lens_rows"] == 8
+
+
+def test_flat_lenses_too_few_to_shrink_the_solve_are_solved():
+    mosaic, edged = lens_mosaic((4, 6), edge_every=2, seed=3)  # every lens row keeps busy lenses of both parities
+    result = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=NOISE)
+    record = result.parameters["flat_lenses"]
+    assert record["found"] == (~edged).sum() and record["flat_lenses"] == 0
+    assert "too few to shrink the solve" in record["why"] and record["solved_lens_rows"] == 4
+    plain = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=NOISE, skip_flat=False)
+    np.testing.assert_array_equal(result.planes, plain.planes)

@@ -48,11 +48,12 @@ def _lens_weights(lens_weights, pitch) -> np.ndarray:
 def colour_counts(sensor_shape, pattern: str, pitch, origin=(0, 0), lens_weights=None) -> np.ndarray:
     """Lit pixels of each colour per lens, int [S, T, 3] (odd pitches: it depends on the lens's Bayer phase)."""
     U, V = pitch
-    H, W = sensor_shape
-    lit = np.tile(_lens_weights(lens_weights, pitch) > 0, (H // U, W // V))
-    channels = channel_map((H, W), pattern, origin)
-    per_pixel = np.stack([(channels == c) & lit for c in range(3)])  # [3, H, W]
-    return per_pixel.reshape(3, H // U, U, W // V, V).sum(axis=(2, 4)).transpose(1, 2, 0)
+    S, T = sensor_shape[0] // U, sensor_shape[1] // V
+    # the Bayer phase of a lens repeats every 2 lens rows and columns: count a 2 x 2 block of lenses
+    lit = np.tile(_lens_weights(lens_weights, pitch) > 0, (2, 2))
+    channels = channel_map((2 * U, 2 * V), pattern, origin)
+    block = np.stack([((channels == c) & lit).reshape(2, U, 2, V).sum(axis=(1, 3)) for c in range(3)], axis=-1)
+    return np.tile(block, (-(-S // 2), -(-T // 2), 1))[:S, :T]
 
 
 def lens_flatness_np(mosaic: np.ndarray, pattern: str, pitch, origin=(0, 0), lens_weights=None, *,
