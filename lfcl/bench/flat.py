@@ -21,12 +21,12 @@ import time
 
 import numpy as np
 
-from ..evaluate import simulated_capture
 from ..imageio import write_json
 from ..layout import LightFieldShape, planes_to_exchange
 from ..methods import demosaic_lightfield
 from ..metrics import lightfield_scores
 from ..noise import from_noise_profile
+from .timing import add_capture_arguments, captures
 
 
 def measure(capture, label: str, repeats: int, threshold: float | None = None) -> dict:
@@ -64,32 +64,21 @@ def measure(capture, label: str, repeats: int, threshold: float | None = None) -
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--lenses", default="64,160")
-    parser.add_argument("--scenes", default="charts,deadleaves")
-    parser.add_argument("--lightfield", default=None, metavar="PATH",
-                        help="a rendered or decoded light field (HCI-layout folder or .npy, 9x9 views) to simulate "
-                             "raws from, instead of --scenes")
-    parser.add_argument("--lux", default="2,12,50")
-    parser.add_argument("--methods", default="admm-uv,admm-uv-xc,admm-uv-xc:linear4d")
+    add_capture_arguments(parser, "admm-uv,admm-uv-xc,admm-uv-xc:linear4d")
     parser.add_argument("--p", type=float, default=None, help="the flat test's p threshold (default: FLAT_P)")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("-o", "--output", help="write the rows as JSON")
     args = parser.parse_args(argv)
     rows = []
-    for lenses in (int(v) for v in args.lenses.split(",")):
-        for scene in [args.lightfield] if args.lightfield else args.scenes.split(","):
-            for lux in (float(v) for v in args.lux.split(",")):
-                capture = simulated_capture(lenses, lux, args.seed, scene, args.lightfield)
-                for method in args.methods.split(","):
-                    row = {"lenses": lenses, "scene": scene, "lux": lux, **measure(capture, method, args.repeats,
-                                                                                   args.p)}
-                    rows.append(row)
-                    print(f"{lenses:4d} {scene[-12:]:12s} {lux:5g} lux {method:20s} solve {row['seconds_solve']:6.3f} s "
-                          f"skip {row['seconds_skip']:6.3f} s x{row['speedup']:.2f}  it {row['iterations_solve']:2d} -> "
-                          f"{row['iterations_skip']:2d}  flat {row['flat_share']:.2f}  rows {row['solved_lens_rows']}"
-                          f"/{row['lens_rows']}  PSNR {row['psnr_center_skip']:.2f} / {row['psnr_mean_skip']:.2f} "
-                          f"({row['gain_center']:+.2f} / {row['gain_mean']:+.2f})", flush=True)
+    for lenses, scene, lux, capture in captures(args):
+        for method in args.methods.split(","):
+            row = {"lenses": lenses, "scene": scene, "lux": lux, **measure(capture, method, args.repeats, args.p)}
+            rows.append(row)
+            print(f"{lenses:4d} {scene[-12:]:12s} {lux:5g} lux {method:20s} solve {row['seconds_solve']:6.3f} s "
+                  f"skip {row['seconds_skip']:6.3f} s x{row['speedup']:.2f}  it {row['iterations_solve']:2d} -> "
+                  f"{row['iterations_skip']:2d}  flat {row['flat_share']:.2f}  rows {row['solved_lens_rows']}"
+                  f"/{row['lens_rows']}  PSNR {row['psnr_center_skip']:.2f} / {row['psnr_mean_skip']:.2f} "
+                  f"({row['gain_center']:+.2f} / {row['gain_mean']:+.2f})", flush=True)
     if args.output:
         write_json(args.output, rows)
 

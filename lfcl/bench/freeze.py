@@ -27,13 +27,13 @@ import time
 
 import numpy as np
 
-from ..evaluate import simulated_capture
 from ..imageio import write_json
 from ..layout import LightFieldShape, planes_to_exchange
 from ..methods import demosaic_lightfield
 from ..metrics import lightfield_scores
 from ..noise import from_noise_profile
 from ..solvers.freeze import FreezeSettings
+from .timing import add_capture_arguments, captures
 
 
 def _floats(text: str) -> list[float]:
@@ -122,45 +122,35 @@ def potential(capture, method: str, fractions: list[float]) -> dict:
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--lenses", default="64,160")
-    parser.add_argument("--scenes", default="charts,deadleaves")
-    parser.add_argument("--lightfield", default=None, metavar="PATH",
-                        help="a rendered or decoded light field (HCI-layout folder or .npy, 9x9 views) to simulate "
-                             "raws from, instead of --scenes")
-    parser.add_argument("--lux", default="2,12,50")
-    parser.add_argument("--methods", default="admm-uv,admm-uv-xc")
+    add_capture_arguments(parser, "admm-uv,admm-uv-xc")
     parser.add_argument("--fractions", default="0.1,0.2,0.3")
     parser.add_argument("--shrink-at", type=float, default=None,
                         help="move once the active blocks are at most this share (default: FreezeSettings')")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--potential", action="store_true", help="the ceiling: skippable lens-iterations only")
     parser.add_argument("-o", "--output", help="write the rows as JSON")
     args = parser.parse_args(argv)
     out = []
-    for lenses in (int(v) for v in args.lenses.split(",")):
-        for scene in [args.lightfield] if args.lightfield else args.scenes.split(","):
-            for lux in _floats(args.lux):
-                capture = simulated_capture(lenses, lux, args.seed, scene, args.lightfield)
-                for method in args.methods.split(","):
-                    if args.potential:
-                        row = {"lenses": lenses, "scene": scene, "lux": lux, "method": method,
-                               **potential(capture, method, _floats(args.fractions))}
-                        out.append(row)
-                        print(f"{lenses:4d} {scene:10s} {lux:4g} lux {method:10s} " + "  ".join(
-                            f"{k} {v:.2f}" if isinstance(v, float) else f"{k} {v}" for k, v in row.items()
-                            if k not in ("lenses", "scene", "lux", "method")), flush=True)
-                        continue
-                    for row in measure(capture, method, _floats(args.fractions), args.repeats, args.shrink_at):
-                        row.update(lenses=lenses, scene=scene, lux=lux, method=method)
-                        out.append(row)
-                        label = "plain" if not row["fraction"] else f"freeze {row['fraction']:g}"
-                        print(f"{lenses:4d} {scene:10s} {lux:4g} lux {method:10s} {label:11s} "
-                              f"{row['seconds']:6.3f} s (x{row['speedup']:.2f}, first {row['first_seconds']:.2f} s, "
-                              f"cpu {row['cpu_seconds']:.2f} s x{row['cpu_speedup']:.2f})  "
-                              f"{row['iterations']:2d} it  skipped {row['skipped']:.3f} work {row['work']:.3f} "
-                              f"moves {row['moves']}  PSNR {row['psnr_center']:.2f} / {row['psnr_mean']:.2f}  "
-                              f"loss {row['loss_center']:+.3f} / {row['loss_mean']:+.3f}", flush=True)
+    for lenses, scene, lux, capture in captures(args):
+        for method in args.methods.split(","):
+            if args.potential:
+                row = {"lenses": lenses, "scene": scene, "lux": lux, "method": method,
+                       **potential(capture, method, _floats(args.fractions))}
+                out.append(row)
+                print(f"{lenses:4d} {scene:10s} {lux:4g} lux {method:10s} " + "  ".join(
+                    f"{k} {v:.2f}" if isinstance(v, float) else f"{k} {v}" for k, v in row.items()
+                    if k not in ("lenses", "scene", "lux", "method")), flush=True)
+                continue
+            for row in measure(capture, method, _floats(args.fractions), args.repeats, args.shrink_at):
+                row.update(lenses=lenses, scene=scene, lux=lux, method=method)
+                out.append(row)
+                label = "plain" if not row["fraction"] else f"freeze {row['fraction']:g}"
+                print(f"{lenses:4d} {scene:10s} {lux:4g} lux {method:10s} {label:11s} "
+                      f"{row['seconds']:6.3f} s (x{row['speedup']:.2f}, first {row['first_seconds']:.2f} s, "
+                      f"cpu {row['cpu_seconds']:.2f} s x{row['cpu_speedup']:.2f})  "
+                      f"{row['iterations']:2d} it  skipped {row['skipped']:.3f} work {row['work']:.3f} "
+                      f"moves {row['moves']}  PSNR {row['psnr_center']:.2f} / {row['psnr_mean']:.2f}  "
+                      f"loss {row['loss_center']:+.3f} / {row['loss_mean']:+.3f}", flush=True)
     if args.output:
         write_json(args.output, out)
 

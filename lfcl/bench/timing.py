@@ -104,3 +104,26 @@ def format_table(headers: list[str], rows: list[list[str]], align: str | None = 
 
     rule = "|" + "|".join(("-" * (w + 1) + ":") if a == "r" else ("-" * (w + 2)) for w, a in zip(widths, align)) + "|"
     return "\n".join([line(headers), rule] + [line(r) for r in rows])
+
+
+def add_capture_arguments(parser, methods: str) -> None:
+    """The options that say which simulated captures a scene benchmark runs on (``--lenses``,
+    ``--scenes`` or ``--lightfield``, ``--lux``, ``--seed``) and ``--methods`` (default ``methods``)."""
+    parser.add_argument("--lenses", default="64,160")
+    parser.add_argument("--scenes", default="charts,deadleaves")
+    parser.add_argument("--lightfield", default=None, metavar="PATH",
+                        help="a rendered or decoded light field (HCI-layout folder or .npy, 9x9 views) to simulate "
+                             "raws from, instead of --scenes")
+    parser.add_argument("--lux", default="2,12,50")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--methods", default=methods)
+
+
+def captures(args):
+    """(lenses, scene, lux, capture) for every capture :func:`add_capture_arguments` names, in memory."""
+    from ..evaluate import simulated_capture
+
+    for lenses in (int(v) for v in args.lenses.split(",")):
+        for scene in [args.lightfield] if args.lightfield else args.scenes.split(","):
+            for lux in (float(v) for v in args.lux.split(",")):
+                yield lenses, scene, lux, simulated_capture(lenses, lux, args.seed, scene, args.lightfield)
