@@ -340,16 +340,16 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         found = flat_lenses(mosaic, pattern, pitch, flat_noise, origin=origin, lens_weights=lens_weights,
                             threshold=flat_threshold, statistics=statistics)
         packing = pack_lenses(~found.flat) if found.flat.any() else None
-        if packing is not None and packing.grid[0] == packing.full[0]:
+        if packing is not None and packing.grid[0] == packing.full[0] and not found.flat.all():
             packing = None  # too few to shrink the solver: packing, filling and a new size would only cost
         if packing is not None:  # the lenses still to solve, side by side, on the device
             real = packing.real
             copy = LensCopy(runtime, pitch)
             table = copy.upload(packing.pairs())
-            mosaic = packing.pack(mosaic, pitch)
-            b = copy(b, runtime.empty(mosaic.shape), table)
-            x0 = copy(x0, runtime.empty((3, *mosaic.shape)), table)
-    H, W = mosaic.shape
+            packed_shape = (packing.grid[0] * U, packing.grid[1] * V)
+            b = copy(b, runtime.empty(packed_shape), table)
+            x0 = copy(x0, runtime.empty((3, *packed_shape)), table)
+    H, W = b.shape
     if region_rows is not None and (dims != "uv" or int(region_rows) < 1):
         raise ValueError(f"region_rows needs admm-uv and a whole number of lens rows >= 1, got {method} "
                          f"and {region_rows!r}: the other priors couple neighbouring lenses")
@@ -379,7 +379,7 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     if real is not None and not real.any():  # every lens is flat: nothing to solve
         planes, runs, band_rows = np.zeros((3, H, W), np.float32), [], []
     elif fits and region_rows is None:
-        result = solve(AdmmSolver(runtime, mosaic.shape, pattern, pitch, dims, origin), b, x0, samples_in(slice(0, H)))
+        result = solve(AdmmSolver(runtime, (H, W), pattern, pitch, dims, origin), b, x0, samples_in(slice(0, H)))
         planes, runs, band_rows = result.x.get(), [dataclasses.replace(result, x=None)], [H]
     elif dims == "uv":
         per_row = (solver_bytes((U, W), dims, exact=True, cross_channel=params.cross_channel),
@@ -390,6 +390,8 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
             bands = [(s0, min(s0 + step, H // U)) for s0 in range(0, H // U, step)]
         x0_host = x0.get()
         del b, x0
+        if packing is not None:
+            mosaic = packing.pack(mosaic, pitch)
         planes, runs = np.zeros_like(x0_host), []
         band_rows, solver, solver_key = [], None, None
         for s0, s1 in bands:
