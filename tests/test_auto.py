@@ -83,6 +83,60 @@ def test_fit_rule_takes_the_cheapest_candidate_close_enough_to_the_best():
     assert band_of(0.002) != band_of(0.02)
 
 
+def test_auto_check_names_the_pick_the_best_fixed_method_per_view_and_the_loss():
+    from lfcl.bench.auto_check import check_rows, format_check
+
+    rule = fit_rule([_row(0.002, {"malvar": (40.0, 45.0, 0.01), "admm-uv@1": (40.05, 45.0, 1.0)})], within=0.1)
+    # a new capture in that band: the rule's pick (malvar) now trails admm-uv@1 on the centre view,
+    # and the best mean image is the unfixed admm-uv@2's, which is not a peer
+    held = dict(_row(0.0021, {"malvar": (38.0, 44.0, 0.01), "admm-uv@1": (39.5, 43.0, 1.0),
+                              "admm-uv@2": (41.0, 46.0, 1.0)}), scene="antinous", lux=12)
+    (checked,) = check_rows([held], rule)
+    assert checked["auto"] == "malvar"
+    assert checked["best_center"] == ["admm-uv@1", 39.5] and checked["best_mean"] == ["malvar", 44.0]
+    assert checked["loss_db"] == pytest.approx(1.5)
+    assert checked["malvar_psnr"] == [38.0, 44.0]
+    assert "| antinous |" in format_check([checked])
+
+
+def test_auto_check_refuses_candidates_without_the_rules_picks(capsys):
+    from lfcl.bench.auto_check import main
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--scenes", "charts", "--lenses", "8", "--lux", "12", "--methods", "malvar,admm-uv@1"])
+    assert exit_info.value.code == 2
+    assert "missing" in capsys.readouterr().err
+
+
+def test_auto_check_scores_the_shipped_rule_on_a_capture(tmp_path, capsys):
+    import json
+
+    from lfcl.bench.auto_check import main
+    from lfcl.bench.auto_rule import candidate_name, capture_loss
+
+    main(["--scenes", "charts", "--lenses", "16", "--lux", "12", "--json", str(tmp_path / "check.json")])
+    saved = json.loads((tmp_path / "check.json").read_text())
+    (row,), (checked,) = saved["rows"], saved["checked"]
+    picked = choose(row["sigma"])
+    assert checked["auto"] == candidate_name(picked.method, picked.strength, picked.start)
+    assert checked["loss_db"] == pytest.approx(capture_loss(row, checked["auto"]))
+    assert checked["auto_psnr"][0] == pytest.approx(row["results"][checked["auto"]]["psnr_center"])
+    assert "within 0.2 dB at" in capsys.readouterr().out
+
+
+def test_training_captures_take_light_fields_at_every_seed(tmp_path):
+    from lfcl.bench.auto_rule import training_captures
+
+    data = np.random.default_rng(3).random((6, 5, 9, 9, 3)).astype(np.float32) + 0.1
+    np.save(tmp_path / "mine.npy", data)
+    captures = list(training_captures([], [1, 2], [], [12.0], (4, 3), [str(tmp_path / "mine.npy")]))
+    assert [(scene, seed, lux) for scene, seed, lux, _ in captures] == [("mine.npy", 1, 12.0), ("mine.npy", 2, 12.0)]
+    first, second = (capture for *_, capture in captures)
+    crop = data[1:5, 1:4]  # the centre 4x3 lenses
+    np.testing.assert_allclose(first.truth / first.truth.mean(), crop / crop.mean(), rtol=1e-4)
+    assert first.mosaic.shape == (36, 27) and not np.array_equal(first.mosaic, second.mosaic)  # new noise per seed
+
+
 def test_shipped_rule_is_what_the_fit_gives_on_its_own_training_rows():
     import json
     from importlib import resources

@@ -27,6 +27,7 @@ from lfcl.sim.dng import read_noise_profile
 from lfcl.sim.texture import read_linear, srgb_decode
 
 ANTINOUS = Path(__file__).resolve().parents[1] / ".." / "shared" / "realdata" / "hci_epinet" / "antinous"
+LYTRO = ANTINOUS.parents[1] / "lytro_epinet" / "2067"
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
@@ -273,6 +274,40 @@ def test_npy_loading(tmp_path):
     (tmp_path / "junk.npy").write_text("not a numpy file")
     with pytest.raises(ValueError, match="cannot read"):
         load_lightfield(tmp_path / "junk.npy")
+
+
+def test_grid_named_folder_loading(tmp_path):
+    """NAME_UU_VV.png views (1-based row, column; EPINET's decoded Lytro layout) load like HCI ones."""
+    views = make_hci(tmp_path / "hci")
+    folder = tmp_path / "grid"
+    folder.mkdir()
+    for k in range(9):
+        (tmp_path / "hci" / f"input_Cam{k:03d}.png").rename(folder / f"0042_{k // 3 + 1:02d}_{k % 3 + 1:02d}.png")
+    lf = load_lightfield(folder)
+    assert lf.shape == (5, 4, 3, 3, 3)
+    for k, view in enumerate(views):
+        np.testing.assert_allclose(lf[:, :, k // 3, k % 3], srgb_decode(view), atol=1e-6)
+    (folder / "0042_02_03.png").unlink()
+    with pytest.raises(ValueError, match="square grid"):
+        load_lightfield(folder)
+    (folder / "0043_02_03.png").write_bytes((folder / "0042_01_01.png").read_bytes())
+    with pytest.raises(ValueError, match="2 captures"):
+        load_lightfield(folder)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(ValueError, match="no input_CamNNN.png or NAME_UU_VV.png"):
+        load_lightfield(empty)
+
+
+@pytest.mark.skipif(not LYTRO.is_dir(), reason="../shared/realdata/lytro_epinet/2067 is not present")
+def test_decoded_lytro_folder():
+    lf = load_lightfield(LYTRO, lenses=(16, 24))
+    assert lf.shape == (16, 24, 9, 9, 3)
+    centre = read_linear(LYTRO / "2067_05_05.png")
+    s0, t0 = (centre.shape[0] - 16) // 2, (centre.shape[1] - 24) // 2
+    np.testing.assert_array_equal(lf[:, :, 4, 4], centre[s0:s0 + 16, t0:t0 + 24])
+    corner = read_linear(LYTRO / "2067_09_01.png")
+    np.testing.assert_array_equal(lf[:, :, 8, 0], corner[s0:s0 + 16, t0:t0 + 24])
 
 
 @pytest.mark.skipif(not ANTINOUS.is_dir(), reason="../shared/realdata/hci_epinet/antinous is not present")

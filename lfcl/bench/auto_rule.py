@@ -30,7 +30,7 @@ from ..auto import band_for, parse_candidate
 from ..evaluate import Capture, capture_in_memory, run_method
 
 DEFAULT_CANDIDATES = ("malvar,linear4d,admm-uv@1,admm-uv@1:linear4d,admm-uvst@1,admm-uv-xc@1,admm-uv-xc@2,"
-                      "admm-uv-xc@1:linear4d,admm-uv-xc@2:linear4d,admm-uvst-xc@1")
+                      "admm-uv-xc@1:linear4d,admm-uv-xc@2:linear4d,admm-uvst-xc@1,admm-uvst@1:linear4d,admm-uvst-xc@1:linear4d")
 #: Band edges in log10(sigma): four bands per decade.
 BANDS_PER_DECADE = 4
 
@@ -46,12 +46,20 @@ def candidate_name(method: str, strength: float, start: str = "malvar") -> str:
     return f"{method}@{strength:g}" + ("" if start == "malvar" else f":{start}")
 
 
-def training_captures(scenes, seeds, procedural_seeds, lux_levels, lenses):
-    """Yield ``(scene label, seed, lux, Capture)``: built-in scenes, then procedural ones."""
+def training_captures(scenes, seeds, procedural_seeds, lux_levels, lenses, lightfields=()):
+    """Yield ``(scene label, seed, lux, Capture)``: built-in scenes, then procedural ones, then
+    raws simulated from each of ``lightfields`` (rendered or decoded light fields; the centre
+    ``lenses``, at every seed of ``seeds``), labelled with the file or folder name."""
     from pathlib import Path
 
     from ..sim import render_planes, simulate
+    from ..sim.lightfield import load_lightfield
     from .training_scenes import training_planes
+
+    def capture(radiance, lux, seed):
+        sim = simulate(lightfield=radiance, lux=lux, seed=seed)
+        return Capture(Path("."), sim.normalised_raw(), sim.pattern, tuple(sim.geometry.pitch), sim.truth,
+                       sim.meta, list(sim.sensor.noise_profile()) * 3)
 
     for scene in scenes:
         for seed in seeds:
@@ -62,10 +70,12 @@ def training_captures(scenes, seeds, procedural_seeds, lux_levels, lenses):
     for seed in procedural_seeds:
         radiance = render_planes(training_planes(lenses, seed, (9, 9)), lenses, (9, 9))  # once per scene
         for lux in lux_levels:
-            sim = simulate(lightfield=radiance, lux=lux, seed=seed)
-            yield "procedural", seed, lux, Capture(Path("."), sim.normalised_raw(), sim.pattern,
-                                                   tuple(sim.geometry.pitch), sim.truth, sim.meta,
-                                                   list(sim.sensor.noise_profile()) * 3)
+            yield "procedural", seed, lux, capture(radiance, lux, seed)
+    for path in lightfields:
+        radiance = load_lightfield(path, lenses)  # once per light field
+        for seed in seeds:
+            for lux in lux_levels:
+                yield Path(path).name, seed, lux, capture(radiance, lux, seed)
 
 
 def score_captures(captures, candidates, log=print) -> list[dict]:
@@ -154,6 +164,10 @@ def held_out_losses(rows: list[dict], rule: list[dict]) -> list[dict]:
     return out
 
 
+def _paths(spec: str) -> list[str]:
+    return [part.strip() for part in spec.split(",") if part.strip()]
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("-o", "--output", required=True)
@@ -161,7 +175,12 @@ def main(argv=None):
     parser.add_argument("--seeds", default="1,2")
     parser.add_argument("--procedural-seeds", default="2000-2011",
                         help="seeds of lfcl/bench/training_scenes.py scenes to train on ('' for none)")
+    parser.add_argument("--lightfields", default="", metavar="PATHS",
+                        help="rendered or decoded light fields (comma-separated; HCI-layout or NAME_UU_VV.png folders "
+                             "or .npy) whose simulated raws join the training captures, at every --seeds seed")
     parser.add_argument("--held-out-seeds", default="", help="seeds of --scenes to score the fitted rule on")
+    parser.add_argument("--held-out-lightfields", default="", metavar="PATHS",
+                        help="light fields to score the fitted rule on, at every --held-out-seeds seed")
     parser.add_argument("--lux", default="0.25,0.5,1,2,4,8,12,25,50,100,200")
     parser.add_argument("--lenses", default="64x64")
     parser.add_argument("--candidates", default=DEFAULT_CANDIDATES)
@@ -173,13 +192,14 @@ def main(argv=None):
     candidates = parse_candidates(args.candidates)
     scenes = args.scenes.split(",")
     rows = score_captures(training_captures(scenes, parse_seeds(args.seeds), parse_seeds(args.procedural_seeds), lux,
-                                            lenses), candidates)
+                                            lenses, _paths(args.lightfields)), candidates)
     rule = fit_rule(rows, args.within)
     out = {"generator": f"lfcl {__version__} python -m lfcl.bench.auto_rule", "args": vars(args),
            "seconds": time.perf_counter() - began, "rule": rule, "training": rows}
     held_out = parse_seeds(args.held_out_seeds)
     if held_out:
-        out["held_out"] = score_captures(training_captures(scenes, held_out, [], lux, lenses), candidates)
+        out["held_out"] = score_captures(training_captures(scenes, held_out, [], lux, lenses,
+                                                           _paths(args.held_out_lightfields)), candidates)
         out["held_out_losses"] = held_out_losses(out["held_out"], rule)
     from ..imageio import write_json
 

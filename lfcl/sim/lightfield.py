@@ -7,6 +7,10 @@ Two forms:
   in the benchmark), numbered row-major over ``(u, v)`` so ``Cam040`` is the
   centre of 9x9. Every view is an ``S x T`` image; 8/16-bit files are decoded
   from sRGB to linear (:func:`lfcl.sim.texture.read_linear`).
+* a folder of views named by their (row, column) place, 1-based:
+  ``NAME_UU_VV.png`` with ``UU, VV = 01 .. n`` (the layout of the decoded Lytro
+  Illum captures that EPINET ships, e.g. ``2067_05_05.png`` is the centre of 9x9);
+  every other rule as above.
 * a ``.npy`` file holding ``[S, T, U, V, 3]`` linear values (any real dtype,
   finite, non-negative after clipping tiny negatives to 0).
 
@@ -24,6 +28,7 @@ import numpy as np
 from .texture import read_linear
 
 HCI_VIEW = re.compile(r"^input_Cam(\d{3})\.png$", re.IGNORECASE)
+GRID_VIEW = re.compile(r"^(.+)_(\d{2})_(\d{2})\.png$", re.IGNORECASE)
 
 
 def _centre_crop(S, T, lenses, path):
@@ -37,14 +42,15 @@ def _centre_crop(S, T, lenses, path):
 
 
 def hci_views(folder: Path) -> list[Path]:
-    """The view files of an HCI-layout folder, in Cam order; ``ValueError`` if the set is incomplete."""
+    """The view files of a view folder (either layout), row-major over (u, v); ``ValueError`` if the
+    set is incomplete."""
     numbered = {}
     for entry in folder.iterdir():
         m = HCI_VIEW.match(entry.name)
         if m:
             numbered[int(m.group(1))] = entry
     if not numbered:
-        raise ValueError(f"light-field folder {folder} holds no input_CamNNN.png views")
+        return _grid_views(folder)
     n = len(numbered)
     side = round(float(np.sqrt(n)))
     if side * side != n or side < 2:
@@ -52,6 +58,27 @@ def hci_views(folder: Path) -> list[Path]:
     if sorted(numbered) != list(range(n)):
         raise ValueError(f"light-field folder {folder}: views are not numbered input_Cam000..{n - 1:03d}")
     return [numbered[i] for i in range(n)]
+
+
+def _grid_views(folder: Path) -> list[Path]:
+    """The ``NAME_UU_VV.png`` layout (1-based row and column of the view), row-major."""
+    placed: dict[str, dict[tuple[int, int], Path]] = {}
+    for entry in folder.iterdir():
+        m = GRID_VIEW.match(entry.name)
+        if m:
+            placed.setdefault(m.group(1), {})[int(m.group(2)), int(m.group(3))] = entry
+    if not placed:
+        raise ValueError(f"light-field folder {folder} holds no input_CamNNN.png or NAME_UU_VV.png views")
+    if len(placed) > 1:
+        raise ValueError(f"light-field folder {folder} holds views of {len(placed)} captures "
+                         f"({', '.join(sorted(placed))}): keep one per folder")
+    (name, views), = placed.items()
+    side = max(max(place) for place in views)
+    wanted = [(u, v) for u in range(1, side + 1) for v in range(1, side + 1)]
+    if side < 2 or sorted(views) != wanted:
+        raise ValueError(f"light-field folder {folder}: the {name}_UU_VV.png views do not fill a square grid "
+                         f"{name}_01_01 .. {name}_{side:02d}_{side:02d}")
+    return [views[place] for place in wanted]
 
 
 def load_hci_folder(folder, lenses=None) -> np.ndarray:
@@ -96,7 +123,7 @@ def load_lightfield(path, lenses=None) -> np.ndarray:
     elif path.is_file() and path.suffix.lower() == ".npy":
         lf = load_npy(path, lenses)
     elif path.exists():
-        raise ValueError(f"light field {path} is neither a folder of input_CamNNN.png views nor a .npy file")
+        raise ValueError(f"light field {path} is neither a folder of views nor a .npy file")
     else:
         raise ValueError(f"light field {path} does not exist")
     if lf.shape[2] < 2 or lf.shape[3] < 2:
