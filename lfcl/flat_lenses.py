@@ -33,7 +33,7 @@ import dataclasses
 import math
 
 import numpy as np
-import scipy.stats
+import scipy.special
 
 from .method_names import FLAT_P, SKIPPABLE  # noqa: F401  (SKIPPABLE: re-exported for lfcl.methods)
 from .noise import NoiseEstimate
@@ -89,7 +89,7 @@ def flat_lenses(mosaic: np.ndarray, pattern: str, pitch, noise: NoiseEstimate, *
                                       floor=noise.floor)
     counts = colour_counts(mosaic.shape, pattern, pitch, origin, lens_weights)
     dof = np.maximum(counts - 1, 0).sum(axis=-1)
-    p_value = scipy.stats.chi2.sf(statistics[..., 3], np.maximum(dof, 1))
+    p_value = scipy.special.chdtrc(np.maximum(dof, 1), statistics[..., 3])  # chi-square survival function
     testable = (counts >= 2).all(axis=-1) & np.isfinite(statistics).all(axis=-1)
     flat = testable & (p_value > threshold)
     return FlatLenses(flat, statistics[..., :3].astype(np.float64), p_value, float(threshold))

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.stats
+import scipy.special
 
 from .layout import channel_map
 from .noise import QUANTILE, NoiseEstimate, fit_noise_model
@@ -53,7 +53,7 @@ def estimate_grid_noise(mosaic: np.ndarray, sampling, bins: int = 16, min_respon
     rss = np.bincount(group, residual**2, G)
     mean = np.bincount(group, y, G) / np.maximum(count, 1)
     keep = enough & (dof > 0)
-    to_sigma2 = dof[keep] / scipy.stats.chi2.ppf(QUANTILE, dof[keep])
+    to_sigma2 = dof[keep] / scipy.special.chdtri(dof[keep], 1 - QUANTILE)  # the chi-square QUANTILE-quantile
     means, variances = mean[keep], rss[keep] / dof[keep] * to_sigma2
     if means.size < 8:
         raise ValueError(f"too few well-lit micro-images ({means.size} lens colours with >= {MIN_SAMPLES} pixels "

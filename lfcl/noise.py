@@ -19,7 +19,7 @@ import itertools
 import math
 
 import numpy as np
-import scipy.stats
+import scipy.special
 
 from .layout import channel_map
 
@@ -55,7 +55,7 @@ def _plane_residual_variances(block: np.ndarray, mask: np.ndarray):
     samples = block[:, rows, cols].astype(np.float64)
     residual = samples @ projection.T
     dof = rows.size - design.shape[1]
-    to_sigma2 = dof / scipy.stats.chi2.ppf(QUANTILE, dof)
+    to_sigma2 = dof / scipy.special.chdtri(dof, 1 - QUANTILE)  # the chi-square QUANTILE-quantile
     return samples.mean(axis=1), (residual**2).sum(axis=1) / dof * to_sigma2
 
 

@@ -421,7 +421,7 @@ class Outputs:
 
 
 def _skipped_flat(record) -> list:
-    from .flat_lenses import skipped_flat_lenses  # scipy.stats: not at import (lfcl --help)
+    from .flat_lenses import skipped_flat_lenses  # scipy: not at import (lfcl --help)
 
     return skipped_flat_lenses(record)
 
