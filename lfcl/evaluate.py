@@ -181,8 +181,13 @@ def capture_in_memory(meta: dict, lux: float) -> Capture:
         sim = simulate(lightfield=scene["path"], **kwargs)
     else:
         raise ValueError(f"cannot re-simulate a capture made from {scene.get('kind')!r} for a lux sweep")
-    mosaic = sim.normalised_raw()
-    return Capture(Path("."), mosaic, sim.pattern, tuple(sim.geometry.pitch), sim.truth, sim.meta,
+    return simulation_capture(sim)
+
+
+def simulation_capture(sim) -> Capture:
+    """A simulated capture (lfcl.sim.simulate's result) as a Capture in memory, its DNG noise
+    profile (one pair per colour plane) as a raw file of it would carry."""
+    return Capture(Path("."), sim.normalised_raw(), sim.pattern, tuple(sim.geometry.pitch), sim.truth, sim.meta,
                    list(sim.sensor.noise_profile()) * 3)
 
 

@@ -21,24 +21,23 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..auto import band_for, load_rule
-from .auto_rule import DEFAULT_CANDIDATES, candidate_name, capture_loss, is_fixed, parse_candidates, score_captures
+from ..auto import load_rule
+from .auto_rule import DEFAULT_CANDIDATES, candidate_name, held_out_losses, is_fixed, parse_candidates, score_captures
 from .timing import add_capture_arguments, captures, format_table
 
 
 def check_rows(rows: list[dict], rule) -> list[dict]:
     """Per scored capture (``score_captures``'s rows): what ``rule`` picks and how it fares."""
     out = []
-    for row in rows:
-        picked = band_for(row["sigma"], rule)[0]["candidate"]
-        results = row["results"]
+    for row, held_out in zip(rows, held_out_losses(rows, rule)):
+        picked, results = held_out["candidate"], row["results"]
         fixed = [name for name in results if is_fixed(name)]
         best = {key: max(fixed, key=lambda name: results[name][key]) for key in ("psnr_center", "psnr_mean")}
         out.append({"scene": row["scene"], "lux": row["lux"], "sigma": row["sigma"], "auto": picked,
                     "auto_psnr": [results[picked]["psnr_center"], results[picked]["psnr_mean"]],
                     "best_center": [best["psnr_center"], results[best["psnr_center"]]["psnr_center"]],
                     "best_mean": [best["psnr_mean"], results[best["psnr_mean"]]["psnr_mean"]],
-                    "loss_db": capture_loss(row, picked),
+                    "loss_db": held_out["loss_db"],
                     "malvar_psnr": ([results["malvar"]["psnr_center"], results["malvar"]["psnr_mean"]]
                                     if "malvar" in results else None)})
     return out

@@ -27,10 +27,11 @@ import numpy as np
 
 from .. import __version__
 from ..auto import band_for, parse_candidate
-from ..evaluate import Capture, capture_in_memory, run_method
+from ..evaluate import capture_in_memory, run_method, simulation_capture
 
 DEFAULT_CANDIDATES = ("malvar,linear4d,admm-uv@1,admm-uv@1:linear4d,admm-uvst@1,admm-uv-xc@1,admm-uv-xc@2,"
-                      "admm-uv-xc@1:linear4d,admm-uv-xc@2:linear4d,admm-uvst-xc@1,admm-uvst@1:linear4d,admm-uvst-xc@1:linear4d")
+                      "admm-uv-xc@1:linear4d,admm-uv-xc@2:linear4d,admm-uvst-xc@1,"
+                      "admm-uvst@1:linear4d,admm-uvst-xc@1:linear4d")
 #: Band edges in log10(sigma): four bands per decade.
 BANDS_PER_DECADE = 4
 
@@ -57,9 +58,7 @@ def training_captures(scenes, seeds, procedural_seeds, lux_levels, lenses, light
     from .training_scenes import training_planes
 
     def capture(radiance, lux, seed):
-        sim = simulate(lightfield=radiance, lux=lux, seed=seed)
-        return Capture(Path("."), sim.normalised_raw(), sim.pattern, tuple(sim.geometry.pitch), sim.truth,
-                       sim.meta, list(sim.sensor.noise_profile()) * 3)
+        return simulation_capture(simulate(lightfield=radiance, lux=lux, seed=seed))
 
     for scene in scenes:
         for seed in seeds:
