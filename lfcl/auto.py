@@ -6,7 +6,8 @@ shipped as lfcl/data/auto_rule.json. ``python -m lfcl.bench.auto_rule`` fitted i
 on training captures (seeds other than the evaluation seed): in each band it
 holds the cheapest candidate (method and lambda strength) whose worst PSNR loss
 (centre view or mean image) against the best fixed method came within 0.1 dB of
-the smallest such loss. A sigma outside the trained range takes the nearest
+the smallest such loss, and whose mean loss came within 0.1 dB of the smallest
+mean loss of those. A sigma outside the trained range takes the nearest
 band, and the reason says so.
 
 Example::
@@ -113,6 +114,7 @@ def choose(sigma: float, rule=None) -> AutoChoice:
     method, strength, start = parse_candidate(band["candidate"])
     reason = (f"sigma {sigma:.3g} {where} {band['sigma_from']:.3g}-{band['sigma_to']:.3g}: on its "
               f"{band['captures']} training captures {band['candidate']} was the cheapest candidate within "
-              f"{band['within_db']:g} dB of the smallest worst-case PSNR loss against the best fixed method "
-              f"(its loss: {band['worst_loss_db']:.2f} dB)")
+              f"{band['within_db']:g} dB of the smallest worst-case and mean PSNR loss against the best fixed "
+              f"method (its losses: {band['worst_loss_db']:.2f} dB worst"
+              + (f", {band['mean_loss_db']:.2f} dB mean)" if "mean_loss_db" in band else ")"))
     return AutoChoice(method, strength, float(sigma), reason, start)

@@ -1,9 +1,10 @@
 """What ``--method auto`` skipped, and why: entries for the ``skipped`` list of `lfcl process` (docs/outputs.md).
 
 ``auto`` (lfcl/auto.py) picks, in the noise band of the raw, the *cheapest* candidate whose
-worst-case PSNR loss on the training captures came within ``within_db`` of the smallest loss.
-When that is not the candidate with the smallest loss, the better but slower candidates were
-skipped to save time; the band's training rows (lfcl/data/auto_rule.json) say by how much.
+worst-case and mean PSNR losses on the training captures came within ``within_db`` of the
+smallest. Candidates with a smaller worst-case or mean loss than the chosen one were skipped,
+to save time or because they lose more elsewhere; the band's training rows
+(lfcl/data/auto_rule.json) say by how much.
 On a resampled lens grid a method the rule names but that does not run there is replaced
 (lfcl/grid_demosaic.py, ``parameters["auto"]["replaced"]``); that is listed too.
 
@@ -35,15 +36,19 @@ def skipped_by_auto(auto: dict | None, rule=None) -> list[dict]:
     band, _ = band_for(float(auto["sigma"]), rule)
     chosen = band["candidate"]
     losses, seconds = band.get("losses_db", {}), band.get("median_seconds", {})
+    means = band.get("mean_losses_db", {})
     if chosen not in losses:
         return skipped
     for name, loss in sorted(losses.items(), key=lambda item: item[1]):
-        if name == chosen or not loss < losses[chosen]:
+        better_mean = chosen in means and name in means and means[name] < means[chosen]
+        if name == chosen or not (loss < losses[chosen] or better_mean):
             continue
+        cheaper = chosen in seconds and name in seconds and seconds[chosen] < seconds[name]
+        mean = f", mean {means[chosen]:.2f} dB against {means[name]:.2f} dB" if chosen in means and name in means else ""
         cost = (f", median {seconds[chosen]:.2f} s against {seconds[name]:.2f} s"
                 if chosen in seconds and name in seconds else "")
         skipped.append({"output": name, "stage": "demosaic",
-                        "reason": f"auto chose the cheaper {chosen}: worst-case PSNR loss {losses[chosen]:.2f} dB "
-                                  f"against {loss:.2f} dB (within {band['within_db']:g} dB){cost} on "
-                                  f"{band['captures']} training captures"})
+                        "reason": f"auto chose {'the cheaper ' if cheaper else ''}{chosen}: worst-case PSNR loss "
+                                  f"{losses[chosen]:.2f} dB against {loss:.2f} dB{mean} (within "
+                                  f"{band['within_db']:g} dB){cost} on {band['captures']} training captures"})
     return skipped

@@ -137,6 +137,29 @@ def test_training_captures_take_light_fields_at_every_seed(tmp_path):
     assert first.mosaic.shape == (36, 27) and not np.array_equal(first.mosaic, second.mosaic)  # new noise per seed
 
 
+def test_fit_rule_breaks_ties_of_the_worst_loss_by_the_mean_loss_before_the_cost():
+    # one hard capture costs every candidate 2 dB, so the worst losses tie; on the other two the cheap
+    # admm-uv@1 loses 0.5 dB and admm-uv-xc@1 nothing: the mean (0.83 against 0.67 dB) decides
+    hard = _row(0.005, {"admm-uv@1": (40.0, 45.0, 0.1), "admm-uv-xc@1": (40.0, 45.0, 0.2), "malvar": (42.0, 45.0, 0.01)})
+    easy = [_row(0.005, {"admm-uv@1": (39.5, 45.0, 0.1), "admm-uv-xc@1": (40.0, 45.0, 0.2), "malvar": (38.0, 44.0, 0.01)})
+            for _ in range(2)]
+    (band,) = fit_rule([hard, *easy], within=0.1)
+    assert band["losses_db"]["admm-uv@1"] == pytest.approx(2.0) and band["losses_db"]["admm-uv-xc@1"] == pytest.approx(2.0)
+    assert band["mean_losses_db"]["admm-uv@1"] == pytest.approx(1.0) and band["mean_losses_db"]["admm-uv-xc@1"] == pytest.approx(2 / 3)
+    assert band["candidate"] == "admm-uv-xc@1" and band["mean_loss_db"] == pytest.approx(2 / 3)
+    # within 0.5 dB on average the cheaper one is good enough again
+    (loose,) = fit_rule([hard, *easy], within=0.5)
+    assert loose["candidate"] == "admm-uv@1"
+    # the summary lists the work skipped: candidates better in the worst case or on average
+    from lfcl.auto_report import skipped_by_auto
+
+    assert skipped_by_auto({"method": "admm-uv-xc", "sigma": 0.005}, [band]) == []
+    (skipped,) = skipped_by_auto({"method": "admm-uv", "sigma": 0.005}, [loose])
+    assert skipped["output"] == "admm-uv-xc@1"
+    assert skipped["reason"].startswith("auto chose the cheaper admm-uv@1: ")
+    assert "mean 1.00 dB against 0.67 dB" in skipped["reason"]
+
+
 def test_shipped_rule_is_what_the_fit_gives_on_its_own_training_rows():
     import json
     from importlib import resources
