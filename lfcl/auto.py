@@ -31,6 +31,10 @@ RULE_FILE = "auto_rule.json"
 #: on a pitch without coefficients, a method a resampled grid lacks): the method that gained
 #: over malvar on every setting measured (docs/admm.md, docs/geometry.md), at strength 1.
 AUTO_FALLBACK = "admm-uv"
+#: What docs/auto.md measured on raws simulated from the two real light fields (antinous, Lytro 2067),
+#: quoted when a raw's content lies outside the rule's training captures.
+REAL_CONTENT_RATIOS = "1.1-2.2"
+REAL_CONTENT_LOSS = "0.6-2.5 dB"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,6 +46,10 @@ class AutoChoice:
     sigma: float
     reason: str
     start: str = "malvar"  # the ADMM methods' first estimate (lfcl.methods.STARTS)
+    # the raw's cross-lens ratio (lfcl/lens_ratio.py; None: not measured or not significant) and
+    # whether the band's training captures spanned it (None: unknown)
+    lens_ratio: float | None = None
+    seen_content: bool | None = None
 
     def as_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -88,7 +96,7 @@ def replacement(choice: AutoChoice, why: str, method: str | None = None, strengt
     strength = choice.strength if strength is None else strength
     at = f" at strength {strength:g}" if strength != 1 else ""
     ran = AutoChoice(method, strength, choice.sigma, f"{choice.reason}; {why}, so {method}{at} from a Malvar start",
-                     "malvar")
+                     "malvar", choice.lens_ratio, choice.seen_content)
     return ran, {"method": choice.method, "strength": choice.strength, "start": choice.start, "why": why}
 
 
@@ -106,8 +114,13 @@ def for_pitch(choice: AutoChoice, pitch) -> tuple[AutoChoice, dict | None]:
     return replacement(choice, why, *((AUTO_FALLBACK, 1.0) if choice.method == "linear4d" else ()))
 
 
-def choose(sigma: float, rule=None) -> AutoChoice:
-    """The method and strength for noise level ``sigma``."""
+def choose(sigma: float, rule=None, lens_ratio: float | None = None) -> AutoChoice:
+    """The method and strength for noise level ``sigma``.
+
+    ``lens_ratio``: the raw's cross-lens ratio (lfcl/lens_ratio.py). It does not change the
+    choice; when it lies outside what the band's training captures spanned, the reason says
+    that the rule has not seen such content.
+    """
     if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma >= 0):
         raise ValueError(f"auto needs a finite noise level >= 0, got {sigma!r}")
     band, where = band_for(sigma, rule)
@@ -117,4 +130,13 @@ def choose(sigma: float, rule=None) -> AutoChoice:
               f"{band['within_db']:g} dB of the smallest worst-case and mean PSNR loss against the best fixed "
               f"method (its losses: {band['worst_loss_db']:.2f} dB worst"
               + (f", {band['mean_loss_db']:.2f} dB mean)" if "mean_loss_db" in band else ")"))
-    return AutoChoice(method, strength, float(sigma), reason, start)
+    seen = None
+    trained = band.get("lens_ratio_range")
+    if lens_ratio is not None and trained:
+        seen = trained[0] <= lens_ratio <= trained[1]
+        if not seen:
+            reason += (f"; the raw's cross-lens ratio {lens_ratio:.2f} lies outside the {trained[0]:.2f}-"
+                       f"{trained[1]:.2f} of those captures, so the rule has not seen such content (on raws "
+                       f"simulated from two real light fields, ratios {REAL_CONTENT_RATIOS}, it lost "
+                       f"{REAL_CONTENT_LOSS} to the best fixed method: docs/auto.md)")
+    return AutoChoice(method, strength, float(sigma), reason, start, lens_ratio, seen)

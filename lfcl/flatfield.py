@@ -64,16 +64,22 @@ def flat_field(mosaic: np.ndarray, lens_response: np.ndarray, threshold: float =
 
     Pixels with response < threshold keep their raw value (they get weight 0).
     """
+    gain, weights = flat_field_gain(lens_response, threshold)
+    U, V = gain.shape
+    if mosaic.shape[0] % U or mosaic.shape[1] % V:
+        raise ValueError(f"mosaic {mosaic.shape} is not a whole number of {U}x{V} lenses")
+    tiled = np.tile(gain, (mosaic.shape[0] // U, mosaic.shape[1] // V))
+    return (mosaic * tiled).astype(np.float32), weights
+
+
+def flat_field_gain(lens_response: np.ndarray, threshold: float = DEFAULT_THRESHOLD):
+    """(gain [U, V] that flat-fields a lens, data-term weights [U, V]): 1 / response and response^2
+    where the response reaches ``threshold``, 1 and 0 on the dark pixels."""
     response = np.asarray(lens_response, dtype=np.float32)
     if response.ndim != 2 or not np.all(np.isfinite(response)) or response.min() < 0:
         raise ValueError(f"lens response must be a finite, non-negative 2-D array, got shape {response.shape}")
-    U, V = response.shape
-    if mosaic.shape[0] % U or mosaic.shape[1] % V:
-        raise ValueError(f"mosaic {mosaic.shape} is not a whole number of {U}x{V} lenses")
     usable = response >= threshold
     if not usable.any():
         raise ValueError(f"no lens pixel has a white response >= {threshold}: is the white image too dark?")
     gain = np.where(usable, 1.0 / np.maximum(response, 1e-6), 1.0).astype(np.float32)
-    tiled = np.tile(gain, (mosaic.shape[0] // U, mosaic.shape[1] // V))
-    weights = np.where(usable, response**2, 0.0).astype(np.float32)
-    return (mosaic * tiled).astype(np.float32), weights
+    return gain, np.where(usable, response**2, 0.0).astype(np.float32)

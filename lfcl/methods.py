@@ -278,9 +278,11 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         raise ValueError(f"start must be one of {', '.join(STARTS)}, got {start!r}")
     if method == "auto":  # choose the method and strength from the noise level (lfcl/auto.py), then run it
         from .auto import choose, for_pitch
+        from .lens_ratio import cross_lens_ratio
 
         noise = noise if noise is not None else estimate_noise(mosaic, pattern, pitch, origin)
-        choice, replaced = for_pitch(choose(noise.sigma), pitch)
+        lens_ratio = cross_lens_ratio(mosaic, pitch, noise, lens_response)  # is the content like the training's?
+        choice, replaced = for_pitch(choose(noise.sigma, lens_ratio=lens_ratio), pitch)
         result = demosaic_lightfield(mosaic, pattern, pitch, choice.method, origin=origin, lam=lam,
                                      iterations=iterations, rho=rho, strength=strength * choice.strength,
                                      noise=noise, device=device, callback=callback, max_memory=max_memory,

@@ -121,6 +121,8 @@ def test_auto_check_scores_the_shipped_rule_on_a_capture(tmp_path, capsys):
     assert checked["auto"] == candidate_name(picked.method, picked.strength, picked.start)
     assert checked["loss_db"] == pytest.approx(capture_loss(row, checked["auto"]))
     assert checked["auto_psnr"][0] == pytest.approx(row["results"][checked["auto"]]["psnr_center"])
+    assert checked["lens_ratio"] == row["lens_ratio"]
+    assert checked["seen_content"] == choose(row["sigma"], lens_ratio=row["lens_ratio"]).seen_content
     assert "within 0.2 dB at" in capsys.readouterr().out
 
 

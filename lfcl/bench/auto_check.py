@@ -13,7 +13,8 @@ content that nothing in lfcl was fitted on:
 For every capture: the noise level, the candidate the rule picks there, its PSNR
 (centre view / mean image), the best fixed method on each view (every candidate at
 its default strength, either start: the peers of ``auto_rule``) and auto's loss
-against them (the worse of the two views), and Malvar's PSNR.
+against them (the worse of the two views), the raw's cross-lens ratio and whether the
+rule's band was fitted on such content (lfcl/lens_ratio.py), and Malvar's PSNR.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..auto import load_rule
+from ..auto import choose, load_rule
 from .auto_rule import DEFAULT_CANDIDATES, candidate_name, held_out_losses, is_fixed, parse_candidates, score_captures
 from .timing import add_capture_arguments, captures, format_table
 
@@ -37,7 +38,8 @@ def check_rows(rows: list[dict], rule) -> list[dict]:
                     "auto_psnr": [results[picked]["psnr_center"], results[picked]["psnr_mean"]],
                     "best_center": [best["psnr_center"], results[best["psnr_center"]]["psnr_center"]],
                     "best_mean": [best["psnr_mean"], results[best["psnr_mean"]]["psnr_mean"]],
-                    "loss_db": held_out["loss_db"],
+                    "loss_db": held_out["loss_db"], "lens_ratio": row.get("lens_ratio"),
+                    "seen_content": choose(row["sigma"], rule, lens_ratio=row.get("lens_ratio")).seen_content,
                     "malvar_psnr": ([results["malvar"]["psnr_center"], results["malvar"]["psnr_mean"]]
                                     if "malvar" in results else None)})
     return out
@@ -47,11 +49,18 @@ def format_check(checked: list[dict]) -> str:
     rows = [[r["scene"], f"{r['lux']:g}", f"{r['sigma']:.4f}", r["auto"],
              f"{r['auto_psnr'][0]:.2f} / {r['auto_psnr'][1]:.2f}",
              f"{r['best_center'][1]:.2f} ({r['best_center'][0]})", f"{r['best_mean'][1]:.2f} ({r['best_mean'][0]})",
-             f"{r['loss_db']:.2f}",
+             f"{r['loss_db']:.2f}", _content(r),
              "n/a" if r["malvar_psnr"] is None else f"{r['malvar_psnr'][0]:.2f} / {r['malvar_psnr'][1]:.2f}"]
             for r in checked]
     return format_table(["scene", "lux", "sigma", "auto picks", "auto dB", "best centre", "best mean", "loss dB",
-                         "malvar dB"], rows, "lrrlrrrrr")
+                         "cross-lens ratio", "malvar dB"], rows, "lrrlrrrrrr")
+
+
+def _content(checked: dict) -> str:
+    """The raw's cross-lens ratio and whether the rule's band was fitted on such content."""
+    if checked["lens_ratio"] is None:
+        return "n/a"
+    return f"{checked['lens_ratio']:.2f} ({'seen' if checked['seen_content'] else 'not seen'})"
 
 
 def main(argv=None):

@@ -29,6 +29,8 @@ import numpy as np
 from .. import __version__
 from ..auto import band_for, parse_candidate
 from ..evaluate import capture_in_memory, run_method, simulation_capture
+from ..lens_ratio import cross_lens_ratio
+from ..noise import from_noise_profile
 
 DEFAULT_CANDIDATES = ("malvar,linear4d,admm-uv@1,admm-uv@1:linear4d,admm-uvst@1,admm-uv-xc@1,admm-uv-xc@2,"
                       "admm-uv-xc@1:linear4d,admm-uv-xc@2:linear4d,admm-uvst-xc@1,"
@@ -82,7 +84,9 @@ def score_captures(captures, candidates, log=print) -> list[dict]:
     """Every candidate on every capture of ``captures`` (training_captures): sigma, PSNRs and seconds."""
     rows = []
     for scene, seed, lux, capture in captures:
-        row = {"scene": scene, "seed": seed, "lux": lux, "results": {}}
+        row = {"scene": scene, "seed": seed, "lux": lux, "results": {},
+               "lens_ratio": cross_lens_ratio(capture.mosaic, capture.pitch,
+                                              from_noise_profile(capture.noise_profile, capture.mosaic))}
         for method, strength, start in candidates:
             overrides = {} if method in ("malvar", "linear4d") else {"strength": strength, "start": start}
             result = run_method(capture, method, **overrides)
@@ -140,11 +144,14 @@ def fit_rule(rows: list[dict], within: float) -> list[dict]:
         robust = [n for n in names if worst[n] <= min(worst.values()) + within]
         good = [n for n in robust if mean[n] <= min(mean[m] for m in robust) + within]
         chosen = min(good, key=lambda n: seconds[n])
+        ratios = [r["lens_ratio"] for r in members if r.get("lens_ratio") is not None]
         rule.append({
             "sigma_from": 10 ** (band / BANDS_PER_DECADE), "sigma_to": 10 ** ((band + 1) / BANDS_PER_DECADE),
             "candidate": chosen, "worst_loss_db": worst[chosen], "mean_loss_db": mean[chosen], "within_db": within,
             "captures": len(members), "losses_db": worst, "mean_losses_db": mean,
             "median_seconds": {n: seconds[n] for n in names},
+            # the content the band was fitted on (lfcl/lens_ratio.py); auto says when a raw lies outside
+            "lens_ratio_range": [min(ratios), max(ratios)] if ratios else None,
         })
     return rule
 
