@@ -78,7 +78,7 @@ def cross_lens_ratio(mosaic: np.ndarray, pitch, noise: NoiseEstimate, lens_respo
     lens_grid = np.asarray(mosaic[:S * U, :T * V], dtype=np.float32).reshape(S, U, T, V).transpose(0, 2, 1, 3)
     sums = {"across": [0.0, 0.0, 0], "within": [0.0, 0.0, 0]}
     for rows in _sampled_lens_rows(S, T, max_lenses):
-        raw = lens_grid[rows]  # [s, T, U, V]
+        raw = lens_grid[rows].astype(np.float64)  # [s, T, U, V]; float64: squares of huge values stay finite
         x = raw * gain  # flat-fielded; its variance is the raw's times gain^2
         var = (noise.gain * np.maximum(raw, 0) + noise.floor) * gain * gain
         pairs = {
@@ -95,7 +95,7 @@ def cross_lens_ratio(mosaic: np.ndarray, pitch, noise: NoiseEstimate, lens_respo
                 sums[kind][2] += count
     means = {}
     for kind, (total, squares, count) in sums.items():
-        if count < 2:
+        if count < 2 or not (math.isfinite(total) and math.isfinite(squares)):
             return None
         mean = total / count
         spread = math.sqrt(max(squares / count - mean * mean, 0.0) / count)
