@@ -13,6 +13,11 @@
 // any n >= 2, every extended sample keeps its true CFA colour (period is even).
 // For n == 1 every index maps to 0. All indices land in [0, n).
 //
+// Lens-bounded (lens_u, lens_v > 0): the same mirror, about each lens's edge samples
+// instead of the sensor's, so that no filter reads a neighbouring micro-image (a lens of
+// lens_u x lens_v pixels is treated as an image of its own; H and W are whole lenses).
+// lens_u = lens_v = 0: the whole sensor is one image (the paper's Malvar).
+//
 // Input: mosaic [H, W] float32. Output: planes [3, H, W] float32 (R, G, B).
 // Global size: (W, H); work-items past the image return.
 
@@ -91,23 +96,27 @@ inline float rb_at_br(const neighbourhood p)
 }
 
 __kernel void malvar(__global const float *mosaic, __global float *planes,
-                     const int height, const int width, const int pattern)
+                     const int height, const int width, const int pattern,
+                     const int lens_u, const int lens_v)
 {
     const int col = get_global_id(0), row = get_global_id(1);
     if (col >= width || row >= height) return;
 
+    // The image the filters see: the sensor, or the pixel's lens (u, v: the pixel in it).
+    const int span_u = lens_u > 0 ? lens_u : height, span_v = lens_v > 0 ? lens_v : width;
+    const int u = lens_u > 0 ? row % lens_u : row, v = lens_v > 0 ? col % lens_v : col;
     // Row / column indices for offsets -2 .. +2 (index 2 is the centre); only the
     // 2-pixel frame needs the mirror (integer divisions are slow on a CPU).
     int r[5], c[5];
-    if (row >= 2 && row + 2 < height && col >= 2 && col + 2 < width) {
+    if (u >= 2 && u + 2 < span_u && v >= 2 && v + 2 < span_v) {
         for (int k = 0; k < 5; ++k) {
             r[k] = (row + k - 2) * width;
             c[k] = col + k - 2;
         }
     } else {
         for (int k = 0; k < 5; ++k) {
-            r[k] = mirror_index(row + k - 2, height) * width;
-            c[k] = mirror_index(col + k - 2, width);
+            r[k] = (row - u + mirror_index(u + k - 2, span_u)) * width;
+            c[k] = col - v + mirror_index(v + k - 2, span_v);
         }
     }
 #define AT(dr, dc) mosaic[r[2 + (dr)] + c[2 + (dc)]]

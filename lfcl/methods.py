@@ -31,7 +31,7 @@ import numpy as np
 from .device import get_runtime
 from .flat_lenses import FLAT_P, SKIPPABLE, fill_flat, flat_lenses, pack_lenses
 from .flatfield import flat_field
-from .method_names import METHODS
+from .method_names import METHODS, STARTS
 from .noise import NoiseEstimate, estimate_noise
 from .ops.flatlens import LensFlatness
 from .ops.lenscopy import LensCopy
@@ -167,7 +167,6 @@ FREEZE_FRACTION = 0.3
 FREEZE_DEFAULT = False
 
 #: The first estimates an ADMM method can start from (``demosaic_lightfield(start=...)``).
-STARTS = ("malvar", "linear4d")
 
 
 def freeze_settings_for(method: str, freeze) -> FreezeSettings | None:
@@ -256,9 +255,11 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     a FreezeSettings also sets when the solver shrinks. What froze goes into
     ``parameters["freeze"]``; after a move, ``callback``'s x holds the lenses still solved.
     ``start`` (ADMM methods): the first estimate, ``"malvar"`` (the paper's, and the
-    default) or ``"linear4d"`` (the learned 4D filter, which also reads the neighbouring
+    default), ``"linear4d"`` (the learned 4D filter, which also reads the neighbouring
     lenses: measured in docs/auto.md, it gains on textured and multi-plane scenes and
-    loses on large flat in-focus patches). ``auto`` takes the start its rule names.
+    loses on large flat in-focus patches) or ``"lens-malvar"`` (Malvar bounded to each
+    lens, so that no filter mixes two micro-images; docs/auto.md). ``auto`` takes the
+    start its rule names.
     ``skip_flat`` (admm-uv, admm-uv-xc): lenses that are flat within the noise (a chi-square
     test, lfcl/flat_lenses.py) get their colour means and the solve runs on the others only,
     packed into a smaller mosaic; None: on for those methods at p threshold FLAT_P, True:
@@ -315,8 +316,8 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
 
         noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
         x0 = linear4d_operator(runtime, mosaic, pattern, pitch, origin, noise).forward(b)
-    else:
-        x0 = Malvar(runtime, mosaic.shape, pattern, origin).forward(b)
+    else:  # lens-malvar: Malvar bounded to each lens, so that no filter reads a neighbouring micro-image
+        x0 = Malvar(runtime, mosaic.shape, pattern, origin, lens=pitch if start == "lens-malvar" else None).forward(b)
     if method == "malvar":
         planes = x0.get()
         _check_finite(planes, "malvar", mosaic)

@@ -78,7 +78,7 @@ def test_kernel_bounds_checked_with_padded_global_size(runtime):
     dst = cl.Buffer(runtime.context, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=host_out)
     runtime.launch(
         "malvar", "malvar", (56, 40), src, dst, np.int32(H), np.int32(W),
-        packed_pattern("GRBG"), local_size=(8, 8),
+        packed_pattern("GRBG"), np.int32(0), np.int32(0), local_size=(8, 8),
     )
     cl.enqueue_copy(runtime.queue, host_out, dst)
     runtime.queue.finish()
@@ -205,3 +205,41 @@ def test_malvar_returns_hwc_float32(runtime):
 def test_malvar_rejects_bad_input(mosaic, pattern, match):
     with pytest.raises(ValueError, match=match):
         malvar(mosaic, pattern)
+
+
+# --- lens-bounded ----------------------------------------------------------------
+
+LENSES = [((9, 9), (3, 4)), ((5, 5), (2, 3)), ((4, 6), (3, 2)), ((2, 2), (3, 3)), ((1, 3), (4, 2))]
+
+
+@pytest.mark.parametrize("lens, grid", LENSES, ids=lambda v: "x".join(map(str, v)))
+@pytest.mark.parametrize("origin", ORIGINS, ids=lambda o: f"o{o[0]}{o[1]}")
+@pytest.mark.parametrize("pattern", PATTERNS)
+def test_lens_bounded_is_malvar_of_each_lens_on_its_own(runtime, pattern, origin, lens, grid):
+    """Every lens demosaiced as an image of its own (its Bayer phase from its place), side by side."""
+    (U, V), (S, T) = lens, grid
+    mosaic = _mosaic((S * U, T * V), seed=U * 7 + V)
+    expected = np.empty((3, S * U, T * V), np.float32)
+    for s in range(S):
+        for t in range(T):
+            block = np.s_[s * U:(s + 1) * U, t * V:(t + 1) * V]
+            expected[(slice(None), *block)] = malvar_np(mosaic[block], pattern, (origin[0] + s * U, origin[1] + t * V))
+    np.testing.assert_allclose(malvar_np(mosaic, pattern, origin, lens=lens), expected, rtol=0, atol=1e-6)
+    device = Malvar(runtime, mosaic.shape, pattern, origin, lens=lens).forward(runtime.to_device(mosaic)).get()
+    np.testing.assert_allclose(device, expected, rtol=0, atol=1e-5)
+
+
+def test_lens_bounded_differs_from_the_sensor_wide_malvar_only_near_lens_borders():
+    mosaic = _mosaic((27, 27), seed=11)
+    plain, bounded = malvar_np(mosaic, "GRBG"), malvar_np(mosaic, "GRBG", lens=(9, 9))
+    local = np.arange(27) % 9
+    inner = ((local >= 2) & (local <= 6))[:, None] & ((local >= 2) & (local <= 6))[None, :]
+    np.testing.assert_array_equal(plain[:, inner], bounded[:, inner])
+    assert np.abs(plain[:, ~inner] - bounded[:, ~inner]).max() > 0.01
+
+
+def test_lens_bounded_needs_whole_lenses(runtime):
+    with pytest.raises(ValueError, match="whole lenses"):
+        Malvar(runtime, (20, 18), "GRBG", lens=(9, 9))
+    with pytest.raises(ValueError, match="whole lenses"):
+        malvar_np(np.zeros((18, 20), np.float32), "GRBG", lens=(9, 9))

@@ -1,4 +1,4 @@
-"""The ADMM methods' first estimate: ``start="malvar"`` (the paper's) or ``"linear4d"`` (lfcl.methods)."""
+"""The ADMM methods' first estimate: ``start="malvar"`` (the paper's), ``"linear4d"`` or ``"lens-malvar"``."""
 
 from __future__ import annotations
 
@@ -48,6 +48,22 @@ def test_linear4d_start_is_admm_from_the_linear4d_planes(runtime, textured_mosai
     assert np.linalg.norm(from_malvar.x - expected.x) > 10 * np.linalg.norm(got.planes - expected.x)
 
 
+def test_lens_malvar_start_is_admm_from_the_lens_bounded_malvar_planes(textured_mosaic):
+    """start="lens-malvar" is the float64 reference ADMM run from Malvar bounded to each lens."""
+    b = textured_mosaic
+    got = demosaic_lightfield(b, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=6, start="lens-malvar",
+                              skip_flat=False)
+    reference_params = dataclasses.replace(
+        AdmmParams(**{k: got.parameters[k] for k in AdmmParams.__dataclass_fields__}), cg_steps=200, cg_tol=1e-12)
+    x0 = malvar_np(b, "GRBG", lens=(9, 9)).astype(np.float64)
+    expected = admm_reference(b.astype(np.float64), "GRBG", (9, 9), "uv", reference_params, x0)
+    assert np.linalg.norm(got.planes - expected.x) / np.linalg.norm(expected.x) <= 1e-4
+    assert got.parameters["start"] == "lens-malvar"
+    from_malvar = admm_reference(b.astype(np.float64), "GRBG", (9, 9), "uv", reference_params,
+                                 malvar_np(b, "GRBG").astype(np.float64))
+    assert np.linalg.norm(from_malvar.x - expected.x) > 10 * np.linalg.norm(got.planes - expected.x)
+
+
 def test_default_start_is_malvar(textured_mosaic):
     default = demosaic_lightfield(textured_mosaic, "GRBG", (9, 9), "admm-uv-xc", noise=NOISE, iterations=3)
     malvar = demosaic_lightfield(textured_mosaic, "GRBG", (9, 9), "admm-uv-xc", noise=NOISE, iterations=3,
@@ -67,7 +83,7 @@ def test_process_start_option_reaches_the_solver_and_the_summary(tmp_path):
                                       "--seed", "2", "-o", str(capture)])
     assert result.exit_code == 0, result.output
     summaries = {}
-    for start in ("malvar", "linear4d"):
+    for start in ("malvar", "linear4d", "lens-malvar"):
         out = tmp_path / start
         result = CliRunner().invoke(cli, ["process", str(capture / "raw.dng"), "--pitch", "9", "--method", "admm-uv",
                                           "--start", start, "--outputs", "center", "--no-previews", "-o", str(out),
@@ -76,6 +92,7 @@ def test_process_start_option_reaches_the_solver_and_the_summary(tmp_path):
         summaries[start] = json.loads(result.output)
     assert summaries["linear4d"]["parameters"]["start"] == "linear4d"
     assert summaries["malvar"]["parameters"]["start"] == "malvar"
+    assert summaries["lens-malvar"]["parameters"]["start"] == "lens-malvar"
     result = CliRunner().invoke(cli, ["process", str(capture / "raw.dng"), "--start", "nearest", "-o",
                                       str(tmp_path / "bad")])
     assert result.exit_code != 0 and "nearest" in result.output and not (tmp_path / "bad").exists()

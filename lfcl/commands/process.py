@@ -18,7 +18,7 @@ from pathlib import Path
 
 import click
 
-from ..method_names import FLAT_P, METHODS
+from ..method_names import FLAT_P, METHODS, STARTS
 from . import device_option, user_errors
 
 DEFAULT_OUTPUTS = "center,mean,lightfield"
@@ -64,10 +64,11 @@ _OPTIONS = (
                  metavar="DB",
                  help="Stop the ADMM iterations once one can move PSNR by less than DB dB (docs/auto.md); "
                       "default: the method's own stopping rule. With --iterations: at most that many."),
-    click.option("--start", default=None, type=click.Choice(["malvar", "linear4d"]),
-                 help="First estimate of the ADMM methods: malvar (the paper's) or linear4d (the learned 4D "
-                      "filter; gains on textured and multi-plane scenes, docs/auto.md). Default: malvar; "
-                      "with --method auto, the start its rule names."),
+    click.option("--start", default=None, type=click.Choice(STARTS),
+                 help="First estimate of the ADMM methods: malvar (the paper's), linear4d (the learned 4D "
+                      "filter; gains on textured and multi-plane scenes) or lens-malvar (Malvar bounded to each "
+                      "lens; gains on the mean image), docs/auto.md. Default: malvar; with --method auto, the "
+                      "start its rule names."),
     click.option("--skip-flat/--solve-flat", "skip_flat", default=None,
                  help="Flat lenses (constant per colour within the noise: a chi-square test against the raw's "
                       "noise model) get their colour means and leave the ADMM solve (admm-uv, admm-uv-xc, auto's "

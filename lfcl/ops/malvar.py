@@ -19,6 +19,10 @@ repeats (-2 -> 0, 3 -> 1); along an axis of 1 pixel every index maps to 0 (the
 filters are then applied to that constant extension as they are). The numpy twin
 :func:`malvar_np` and the kernel ``kernels/malvar.cl`` follow the same rule.
 
+``lens=(U, V)`` bounds the filters to each lens of an aligned lens grid: the same mirror
+about the lens's edge samples, so that no filter reads a neighbouring micro-image (the
+lens-bounded Malvar, an ADMM start: lfcl.methods ``start="lens-malvar"``, docs/auto.md).
+
 Layouts: the mosaic is ``[H, W]``; the device class returns planes ``[3, H, W]``
 (docs/layout.md); the public :func:`malvar` returns ``(H, W, 3)``.
 
@@ -56,21 +60,31 @@ def _check_mosaic(mosaic: np.ndarray, name: str = "mosaic"):
         raise ValueError(f"{name} must have shape [H, W], got {mosaic.shape}")
 
 
-def malvar_np(mosaic: np.ndarray, pattern: str, origin=(0, 0)) -> np.ndarray:
+def _neighbour_index(n: int, offset: int, span: int | None) -> np.ndarray:
+    """Index of each pixel's neighbour ``offset`` away along an axis of ``n``, mirrored at the
+    axis's ends (span None) or at the ends of each run of ``span`` pixels (a lens)."""
+    index = np.arange(n)
+    if span is None:
+        return mirror_index(index + offset, n)
+    local = index % span
+    return index - local + mirror_index(local + offset, span)
+
+
+def malvar_np(mosaic: np.ndarray, pattern: str, origin=(0, 0), lens=None) -> np.ndarray:
     """Malvar-He-Cutler demosaic: ``[H, W]`` mosaic -> ``[3, H, W]`` float32 planes.
 
-    Computed in float64 with the mirror border of the module docstring.
+    Computed in float64 with the mirror border of the module docstring; ``lens=(U, V)``:
+    mirrored at every lens's border instead (H and W whole lenses).
     """
     mosaic = np.asarray(mosaic)
     _check_mosaic(mosaic)
     pattern = parse_pattern(pattern)
     H, W = mosaic.shape
-    # np.pad 'reflect' folds repeatedly for pads wider than the axis and repeats a
-    # singleton axis: exactly mirror_index (and the kernel's mirror_index).
-    padded = np.pad(mosaic.astype(np.float64), 2, mode="reflect")
+    spans = (None, None) if lens is None else _lens_spans(lens, (H, W))
+    values = mosaic.astype(np.float64)
 
     def at(dr, dc):
-        return padded[2 + dr : 2 + dr + H, 2 + dc : 2 + dc + W]
+        return values[np.ix_(_neighbour_index(H, dr, spans[0]), _neighbour_index(W, dc, spans[1]))]
 
     C = at(0, 0)
     N1, S1, W1, E1 = at(-1, 0), at(1, 0), at(0, -1), at(0, 1)
@@ -98,14 +112,23 @@ def malvar_np(mosaic: np.ndarray, pattern: str, origin=(0, 0)) -> np.ndarray:
     return np.stack([red, green, blue]).astype(np.float32)
 
 
-class Malvar:
-    """Malvar-He-Cutler demosaicing on the device for an ``(H, W)`` sensor."""
+def _lens_spans(lens, shape) -> tuple[int, int]:
+    U, V = (int(p) for p in lens)
+    if U < 1 or V < 1 or shape[0] % U or shape[1] % V:
+        raise ValueError(f"a lens-bounded Malvar needs whole lenses: {shape[0]}x{shape[1]} pixels, lenses {U}x{V}")
+    return U, V
 
-    def __init__(self, runtime, sensor_shape, pattern: str, origin=(0, 0)):
+
+class Malvar:
+    """Malvar-He-Cutler demosaicing on the device for an ``(H, W)`` sensor (``lens``: bounded to
+    each lens of an aligned grid, module docstring)."""
+
+    def __init__(self, runtime, sensor_shape, pattern: str, origin=(0, 0), lens=None):
         self.runtime = runtime
         self.height, self.width = (int(n) for n in sensor_shape)
         if self.height < 1 or self.width < 1:
             raise ValueError(f"sensor shape must be positive, got {tuple(sensor_shape)}")
+        self.lens = (0, 0) if lens is None else _lens_spans(lens, (self.height, self.width))
         self.pattern = packed_pattern(pattern, origin)
         self.mosaic_shape = (self.height, self.width)
         self.planes_shape = (3, self.height, self.width)
@@ -116,7 +139,7 @@ class Malvar:
         out = output(self.runtime, out, self.planes_shape)
         self.runtime.launch(
             "malvar", "malvar", (self.width, self.height), mosaic.data, out.data,
-            np.int32(self.height), np.int32(self.width), self.pattern,
+            np.int32(self.height), np.int32(self.width), self.pattern, np.int32(self.lens[0]), np.int32(self.lens[1]),
         )
         return out
 
