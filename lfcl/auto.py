@@ -34,7 +34,7 @@ AUTO_FALLBACK = "admm-uv"
 #: What docs/auto.md measured on raws simulated from the two real light fields (antinous, Lytro 2067),
 #: quoted when a raw's content lies outside the rule's training captures.
 REAL_CONTENT_RATIOS = "1.1-2.2"
-REAL_CONTENT_LOSS = "0.6-2.5 dB"
+REAL_CONTENT_LOSS = "0.3-2.5 dB"
 
 
 @dataclasses.dataclass(frozen=True)
