@@ -31,6 +31,14 @@ inline int mirror_index(int i, int n)
     return m < n ? m : period - m;
 }
 
+// mirror_index for i in [-2, n + 1] and n >= 3, without the division (the lens-bounded
+// path takes it for most pixels of a small lens).
+inline int mirror_near(int i, int n)
+{
+    if (n < 3) return mirror_index(i, n);
+    return i < 0 ? -i : (i >= n ? 2 * (n - 1) - i : i);
+}
+
 // The 13 samples of the 5x5 support that the filters use, named by offset:
 // C centre; N1/S1/W1/E1 one step up/down/left/right; N2/S2/W2/E2 two steps;
 // D the sum of the four diagonal neighbours (+-1, +-1).
@@ -115,8 +123,8 @@ __kernel void malvar(__global const float *mosaic, __global float *planes,
         }
     } else {
         for (int k = 0; k < 5; ++k) {
-            r[k] = (row - u + mirror_index(u + k - 2, span_u)) * width;
-            c[k] = col - v + mirror_index(v + k - 2, span_v);
+            r[k] = (row - u + mirror_near(u + k - 2, span_u)) * width;
+            c[k] = col - v + mirror_near(v + k - 2, span_v);
         }
     }
 #define AT(dr, dc) mosaic[r[2 + (dr)] + c[2 + (dc)]]
