@@ -184,6 +184,11 @@ def build_cases(runtime, height: int, width: int, pitch) -> list[Case]:
         Case("Malvar", "malvar.cl:malvar", "read N + write 3N", 4 * N, ("b", "y"),
              lambda d: malvar.forward(d["b"], out=d["y"]), lambda h: malvar_np(h["b"], PATTERN)),
     ]
+    if height % U == 0 and width % V == 0:  # the lens-bounded start needs whole lenses
+        lens_malvar = Malvar(runtime, sensor, PATTERN, lens=pitch)
+        cases.append(Case("Malvar, lens-bounded", "malvar.cl:malvar", "read N + write 3N", 4 * N, ("b", "y"),
+                          lambda d: lens_malvar.forward(d["b"], out=d["y"]),
+                          lambda h: malvar_np(h["b"], PATTERN, lens=pitch)))
     try:  # the published peer, where installed (lfcl[test])
         from colour_demosaicing import demosaicing_CFA_Bayer_Malvar2004
     except ImportError:
