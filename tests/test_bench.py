@@ -12,7 +12,8 @@ from click.testing import CliRunner
 from lfcl.cli import cli
 
 KERNELS = [
-    "copy (reference)", "CFA A", "CFA A^T", "CFA A^T A", "Malvar", "Malvar vs colour-demosaicing", "linear4d",
+    "copy (reference)", "CFA A", "CFA A^T", "CFA A^T A", "Malvar", "Malvar, lens-bounded", "Malvar vs colour-demosaicing",
+    "linear4d",
     "D uv", "D^T uv", "D^T D uv", "normal_apply uv", "jacobi_apply uv", "build_rhs uv", "lens_solve uv",
     "D uvst", "D^T uvst", "D^T D uvst", "normal_apply uvst", "jacobi_apply uvst", "build_rhs uvst",
     "dot", "norm2", "diff_norm2", "abs_sum", "soft_threshold", "zu_update", "axpby",
