@@ -19,7 +19,7 @@ Example::
 
 from __future__ import annotations
 
-from .auto import band_for
+from .auto import band_for, load_rule
 
 
 def skipped_by_auto(auto: dict | None, rule=None) -> list[dict]:
@@ -33,6 +33,8 @@ def skipped_by_auto(auto: dict | None, rule=None) -> list[dict]:
                         "reason": f"auto's rule names it, but {replaced.get('why', 'it does not run here')}: "
                                   f"{auto['method']} instead"})
         return skipped  # the rule's other candidates were weighed against a method that did not run
+    if rule is None:  # the shipped rule that chose: its view and content class
+        rule = load_rule(auto.get("view", "both"), auto.get("content", "default"))
     band, _ = band_for(float(auto["sigma"]), rule)
     chosen = band["candidate"]
     losses, seconds = band.get("losses_db", {}), band.get("median_seconds", {})

@@ -105,7 +105,8 @@ def demosaic_resampled(mosaic: np.ndarray, pattern: str | None, geometry, method
                        threshold: float | None = None, lenses=None, lam=None, iterations=None, rho=None,
                        strength: float = 1.0, cg_steps: int | None = None, interpolation_weight: float | None = None,
                        noise: NoiseEstimate | None = None, device=None, callback=None,
-                       max_memory: int | None = None, tolerance_db: float | None = None) -> GridDemosaicResult:
+                       max_memory: int | None = None, tolerance_db: float | None = None,
+                       auto_view: str = "both") -> GridDemosaicResult:
     """Demosaic (and denoise) a normalised lenslet raw ``mosaic`` [H, W] of any lens grid.
 
     ``geometry``: a :class:`lfcl.calib.Calibration` (its grid and white-image
@@ -135,7 +136,8 @@ def demosaic_resampled(mosaic: np.ndarray, pattern: str | None, geometry, method
     times the chosen strength; a method not in :data:`GRID_METHODS` becomes
     ``lfcl.auto.AUTO_FALLBACK`` at strength 1 and the reason says so. The choice goes into
     ``parameters["auto"]`` (``method``, ``strength``, ``sigma``, ``reason``; plus
-    ``replaced`` = the rule's own ``{"method", "strength"}`` when it fell back).
+    ``replaced`` = the rule's own ``{"method", "strength"}`` when it fell back). ``auto_view``: the
+    view the rule was judged on (lfcl.auto.VIEWS, as in lfcl.methods.demosaic_lightfield).
 
     Returns a :class:`GridDemosaicResult`: ``planes`` [3, S*U, T*V] and
     ``lightfield`` [S, T, U, V, 3] float32, ``sampling`` (its ``as_meta()`` for
@@ -162,7 +164,7 @@ def demosaic_resampled(mosaic: np.ndarray, pattern: str | None, geometry, method
     if method == "auto":
         return _auto(mosaic, sampling, noise, lam=lam, iterations=iterations, rho=rho, strength=strength,
                      cg_steps=cg_steps, interpolation_weight=interpolation_weight, device=device, callback=callback,
-                     max_memory=max_memory, tolerance_db=tolerance_db)
+                     max_memory=max_memory, tolerance_db=tolerance_db, auto_view=auto_view)
     runtime = get_runtime(device)
     start = time.perf_counter()
     x0 = resample_start(runtime, sampling, mosaic)
@@ -215,7 +217,7 @@ def _measured(sampling: SamplingModel, mosaic: np.ndarray):
     return pixels, float(np.mean(mosaic.ravel()[pixels], dtype=np.float64))
 
 
-def _auto(mosaic, sampling: SamplingModel, noise, *, strength, **options) -> GridDemosaicResult:
+def _auto(mosaic, sampling: SamplingModel, noise, *, strength, auto_view="both", **options) -> GridDemosaicResult:
     """``method="auto"`` (see :func:`demosaic_resampled`): choose at the solver's sigma, then run the choice."""
     from .auto import AUTO_FALLBACK, choose, replacement
 
@@ -223,7 +225,7 @@ def _auto(mosaic, sampling: SamplingModel, noise, *, strength, **options) -> Gri
         from .grid_noise import estimate_grid_noise
 
         noise = estimate_grid_noise(mosaic, sampling)
-    choice = choose(noise.sigma_at(_measured(sampling, mosaic)[1]))
+    choice = choose(noise.sigma_at(_measured(sampling, mosaic)[1]), view=auto_view)
     ran, replaced = choice, None
     if choice.method not in GRID_METHODS or choice.start != "malvar":
         what = choice.method if choice.method not in GRID_METHODS else f"{choice.method} from a {choice.start} start"

@@ -230,7 +230,8 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
                         device=None, callback=None, max_memory: int | None = None,
                         lens_response=None, region_rows: int | None = None,
                         tolerance_db: float | None = None, freeze: bool | float | FreezeSettings | None = None,
-                        start: str | None = None, skip_flat: bool | float | None = None) -> DemosaicResult:
+                        start: str | None = None, skip_flat: bool | float | None = None,
+                        auto_view: str = "both") -> DemosaicResult:
     """Demosaic (and denoise) a normalised lenslet mosaic [H, W] into [3, H, W] planes.
 
     H and W must be whole multiples of the pitch (crop first). ``noise`` defaults to
@@ -260,6 +261,9 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     loses on large flat in-focus patches) or ``"lens-malvar"`` (Malvar bounded to each
     lens, so that no filter mixes two micro-images; docs/auto.md). ``auto`` takes the
     start its rule names.
+    ``auto_view`` (``auto`` only): the view its rule was judged on, ``"both"`` (the worse of
+    the centre view and the mean image), ``"center"`` or ``"mean"`` (lfcl.auto.view_for_outputs:
+    a run that writes only that view).
     ``skip_flat`` (admm-uv, admm-uv-xc): lenses that are flat within the noise (a chi-square
     test, lfcl/flat_lenses.py) get their colour means and the solve runs on the others only,
     packed into a smaller mosaic; None: on for those methods at p threshold FLAT_P, True:
@@ -283,7 +287,7 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
 
         noise = noise if noise is not None else estimate_noise(mosaic, pattern, pitch, origin)
         lens_ratio = cross_lens_ratio(mosaic, pitch, noise, lens_response)  # is the content like the training's?
-        choice, replaced = for_pitch(choose(noise.sigma, lens_ratio=lens_ratio), pitch)
+        choice, replaced = for_pitch(choose(noise.sigma, lens_ratio=lens_ratio, view=auto_view), pitch)
         result = demosaic_lightfield(mosaic, pattern, pitch, choice.method, origin=origin, lam=lam,
                                      iterations=iterations, rho=rho, strength=strength * choice.strength,
                                      noise=noise, device=device, callback=callback, max_memory=max_memory,

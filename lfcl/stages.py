@@ -246,6 +246,8 @@ class Demosaic:
     ``skip_flat``: leave lenses that are flat within the noise out of the solve and give them their
     colour means (lfcl/flat_lenses.py; admm-uv, admm-uv-xc, aligned grids); None: on for those methods,
     False: off, True or a p threshold in (0, 1): on.
+    ``auto_view``: with ``auto``, the view its rule was judged on (lfcl.auto.VIEWS; ``lfcl process``
+    passes lfcl.auto.view_for_outputs of its outputs).
     ``device``: an OpenCL device spec or None (``LFCL_DEVICE``, else the first device).
     ``callback(record, x)``: called after every ADMM iteration (progress bars)."""
 
@@ -254,7 +256,8 @@ class Demosaic:
     def __init__(self, method: str = "admm-uv", lam: float | None = None, iterations: int | None = None,
                  strength: float = 1.0, device=None, callback=None, max_memory: int | None = None,
                  tolerance_db: float | None = None, start: str | None = None,
-                 skip_flat: bool | float | None = None):
+                 skip_flat: bool | float | None = None, auto_view: str = "both"):
+        from .auto import check_view
         from .methods import STARTS, flat_threshold_for, parse_method
 
         try:
@@ -283,6 +286,10 @@ class Demosaic:
         except ValueError as e:
             raise ValueError(f"Demosaic: {e}") from None
         self.skip_flat = skip_flat
+        try:
+            self.auto_view = check_view(auto_view)
+        except ValueError as e:
+            raise ValueError(f"Demosaic: {e}") from None
         self.lam, self.iterations, self.strength = lam, iterations, float(strength)
         self.max_memory = None if max_memory is None else int(max_memory)
         self.device, self.callback = device, callback
@@ -290,7 +297,7 @@ class Demosaic:
     def options(self) -> dict:
         return {"method": self.method, "lambda": self.lam, "iterations": self.iterations, "strength": self.strength,
                 "tolerance_db": self.tolerance_db, "max_memory": self.max_memory, "start": self.start,
-                "skip_flat": self.skip_flat}
+                "skip_flat": self.skip_flat, **({"auto_view": self.auto_view} if self.method == "auto" else {})}
 
     def __call__(self, gridded: Gridded) -> Demosaiced:
         _need(gridded, Gridded, "Demosaic", "a Gridded (from Grid)")
@@ -323,7 +330,7 @@ class Demosaic:
             result = demosaic_resampled(gridded.data, mosaic.pattern, gridded.sampling, self.method, lam=self.lam,
                                         iterations=self.iterations, strength=self.strength, noise=noise,
                                         device=self.device, callback=self.callback, max_memory=self.max_memory,
-                                        tolerance_db=self.tolerance_db)
+                                        tolerance_db=self.tolerance_db, auto_view=self.auto_view)
             lightfield = result.lightfield
             extra["sampling"] = result.sampling.as_meta()
         else:
@@ -335,7 +342,7 @@ class Demosaic:
                                          noise=noise, device=self.device, callback=self.callback,
                                          lens_response=gridded.lens_response, max_memory=self.max_memory,
                                          tolerance_db=self.tolerance_db, start=self.start,
-                                         skip_flat=self.skip_flat)
+                                         skip_flat=self.skip_flat, auto_view=self.auto_view)
             S, T = gridded.lenses
             lightfield = planes_to_exchange(result.planes, LightFieldShape(S, T, P, P))
         meta = {

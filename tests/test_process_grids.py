@@ -202,7 +202,7 @@ def _rule(candidate, losses):
 def test_auto_lists_what_it_skipped_for_a_cheaper_method(captures, monkeypatch, tmp_path):
     import lfcl.auto
 
-    monkeypatch.setattr(lfcl.auto, "load_rule", lambda: _rule("malvar", {"malvar": 0.05, "admm-uv@1": 0.0}))
+    monkeypatch.setattr(lfcl.auto, "load_rules", lambda: {"rule": _rule("malvar", {"malvar": 0.05, "admm-uv@1": 0.0})})
     out = tmp_path / "out"
     result = invoke("process", captures / "rotated" / "raw.dng", "--calibration", captures / "rotated" / "cal.json",
                     "--method", "auto", "-o", out, "--outputs", "lightfield", "--no-previews")
@@ -223,7 +223,8 @@ def test_auto_on_a_resampled_grid_replaces_a_method_it_cannot_run(captures, monk
                                                                   replaced):
     import lfcl.auto
 
-    monkeypatch.setattr(lfcl.auto, "load_rule", lambda: _rule(candidate, {candidate: 0.0, "admm-uv@1": 0.2}))
+    monkeypatch.setattr(lfcl.auto, "load_rules",
+                        lambda: {"rule": _rule(candidate, {candidate: 0.0, "admm-uv@1": 0.2})})
     out = tmp_path / "out"
     result = invoke("process", captures / "hex" / "raw.dng", "--calibration", captures / "hex" / "cal.json",
                     "--method", "auto", "-o", out, "--outputs", "lightfield", "--no-previews", "--json")
@@ -292,3 +293,26 @@ def test_a_linear4d_start_on_a_resampled_grid_is_one_line_before_any_work(captur
                     "--method", "admm-uv", "--start", "linear4d", "-o", out)
     assert result.exit_code != 0 and "--start linear4d needs an aligned square lens grid" in result.output
     assert "Traceback" not in result.output and not out.exists()
+
+
+@pytest.mark.parametrize("grid", ["rotated", "aligned"])
+@pytest.mark.parametrize("outputs, view, method", [("center", "center", "malvar"), ("mean,refocus", "mean", "admm-uv"),
+                                                   ("center,lightfield", "both", "admm-st")])
+def test_auto_takes_the_rule_judged_on_the_outputs_asked_for(captures, monkeypatch, tmp_path, grid, outputs, view,
+                                                             method):
+    import lfcl.auto
+
+    rules = {"center": _rule("malvar", {"malvar": 0.0, "admm-uv@1": 0.3}),
+             "mean": _rule("admm-uv@1", {"malvar": 0.4, "admm-uv@1": 0.0}),
+             "both": _rule("admm-st@1", {"malvar": 0.4, "admm-uv@1": 0.3, "admm-st@1": 0.2})}
+    monkeypatch.setattr(lfcl.auto, "load_rules", lambda: {"rule": rules["both"], "rules_by_view": rules})
+    out = tmp_path / "out"
+    result = invoke("process", captures / grid / "raw.dng", "--calibration", captures / grid / "cal.json",
+                    "--method", "auto", "-o", out,
+                    "--outputs", outputs, "--no-previews", "--json")
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.output)
+    auto = summary["parameters"]["auto"]
+    assert (auto["view"], auto["method"]) == (view, method)
+    assert lfcl.auto.VIEW_WORDS[view] in auto["reason"]
+    assert summary["options"]["auto_view"] == view

@@ -10,8 +10,12 @@ Then, for each band of sigma (four per decade), pick the *cheapest* candidate
 whose worst loss against the best fixed method (every method at its default
 strength, either start; PSNR of the centre view and of the mean image) is within
 ``--within`` dB of the smallest such loss, and whose mean loss is within ``--within``
-dB of the smallest mean loss among those (``fit_rule``). ``--held-out-seeds`` scores
-the same candidates on other captures and prints what the fitted rule loses there.
+dB of the smallest mean loss among those (``fit_rule``). It fits three rules: the
+losses judged on the worse of the two views (``rule``, what ``auto`` runs by default)
+and on each view alone (``rules_by_view``, for runs that write only that view:
+lfcl.auto.view_for_outputs). ``--held-out-seeds`` scores the same candidates on other
+captures and prints what the fitted rules lose there. ``--refit JSON`` fits again on the
+scored rows of an earlier output instead of scoring anew.
 
 The training seeds (default 1, 2) are not the evaluation seed 0 of docs/admm.md.
 
@@ -23,11 +27,12 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 
 from .. import __version__
-from ..auto import band_for, parse_candidate
+from ..auto import LOW_RATIO_BELOW, VIEWS, band_for, content_class, parse_candidate, rule_bands
 from ..evaluate import capture_in_memory, run_method, simulation_capture
 from ..lens_ratio import cross_lens_ratio
 from ..noise import from_noise_profile
@@ -37,6 +42,8 @@ DEFAULT_CANDIDATES = ("malvar,linear4d,admm-uv@1,admm-uv@1:linear4d,admm-uvst@1,
                       "admm-uvst@1:linear4d,admm-uvst-xc@1:linear4d,admm-uv@1:lens-malvar,admm-uv-xc@1:lens-malvar")
 #: Band edges in log10(sigma): four bands per decade.
 BANDS_PER_DECADE = 4
+#: The PSNRs each rule's losses are judged on (lfcl.auto.VIEWS).
+VIEW_KEYS = {"both": ("psnr_center", "psnr_mean"), "center": ("psnr_center",), "mean": ("psnr_mean",)}
 
 
 def parse_candidates(spec: str) -> list[tuple[str, float, str]]:
@@ -54,8 +61,6 @@ def training_captures(scenes, seeds, procedural_seeds, lux_levels, lenses, light
     """Yield ``(scene label, seed, lux, Capture)``: built-in scenes, then procedural ones, then
     raws simulated from each of ``lightfields`` (rendered or decoded light fields; the centre
     ``lenses``, at every seed of ``seeds``), labelled with the file or folder name."""
-    from pathlib import Path
-
     from ..sim import render_planes, simulate
     from ..sim.lightfield import load_lightfield
     from .training_scenes import training_planes
@@ -109,20 +114,29 @@ def is_fixed(name: str) -> bool:
     return parse_candidate(name)[1] == 1.0
 
 
-def capture_loss(row: dict, name: str) -> float:
-    """How far candidate ``name`` falls below the best fixed method on one capture (dB; the
-    worse of the centre view and the mean image)."""
+def capture_loss(row: dict, name: str, view: str = "both") -> float:
+    """How far candidate ``name`` falls below the best fixed method on one capture (dB; on ``view``:
+    the worse of the centre view and the mean image, or one of them). The best fixed method is
+    the best in each view, so with ``both`` no single method need reach 0 (:func:`oracle_loss`)."""
     fixed = [n for n in row["results"] if is_fixed(n)]
     return max(max(row["results"][n][key] for n in fixed) - row["results"][name][key]
-               for key in ("psnr_center", "psnr_mean"))
+               for key in VIEW_KEYS[view])
 
 
-def fit_rule(rows: list[dict], within: float) -> list[dict]:
+def oracle_loss(row: dict, view: str = "both") -> tuple[float, str]:
+    """The smallest :func:`capture_loss` of any fixed method on this capture, and that method: what a
+    choice among the fixed methods made with the ground truth would lose (0 for one view)."""
+    losses = {n: capture_loss(row, n, view) for n in row["results"] if is_fixed(n)}
+    best = min(losses, key=losses.get)
+    return losses[best], best
+
+
+def fit_rule(rows: list[dict], within: float, view: str = "both") -> list[dict]:
     """One entry per sigma band that has training captures: the chosen candidate and why.
 
-    A candidate's loss on a capture is how far its PSNR (centre view or mean image,
-    whichever is worse) falls below the best fixed method's (every method at its
-    default strength). Over the band's captures it has a worst loss and a mean loss.
+    A candidate's loss on a capture is how far its PSNR (``view``: centre view or mean
+    image, whichever is worse, or one of them) falls below the best fixed method's (every
+    method at its default strength). Over the band's captures it has a worst loss and a mean loss.
     The chosen candidate is the cheapest (median seconds) whose worst loss is within
     ``within`` dB of the smallest worst loss and whose mean loss is within ``within``
     dB of the smallest mean loss among those: robust first, then no worse on average
@@ -138,7 +152,7 @@ def fit_rule(rows: list[dict], within: float) -> list[dict]:
     rule = []
     for band in sorted(bands):
         members = bands[band]
-        losses = {n: [capture_loss(r, n) for r in members] for n in names}
+        losses = {n: [capture_loss(r, n, view) for r in members] for n in names}
         worst = {n: max(v) for n, v in losses.items()}
         mean = {n: float(np.mean(v)) for n, v in losses.items()}
         robust = [n for n in names if worst[n] <= min(worst.values()) + within]
@@ -147,7 +161,8 @@ def fit_rule(rows: list[dict], within: float) -> list[dict]:
         ratios = [r["lens_ratio"] for r in members if r.get("lens_ratio") is not None]
         rule.append({
             "sigma_from": 10 ** (band / BANDS_PER_DECADE), "sigma_to": 10 ** ((band + 1) / BANDS_PER_DECADE),
-            "candidate": chosen, "worst_loss_db": worst[chosen], "mean_loss_db": mean[chosen], "within_db": within,
+            "candidate": chosen, "view": view, "worst_loss_db": worst[chosen], "mean_loss_db": mean[chosen],
+            "within_db": within,
             "captures": len(members), "losses_db": worst, "mean_losses_db": mean,
             "median_seconds": {n: seconds[n] for n in names},
             # the content the band was fitted on (lfcl/lens_ratio.py); auto says when a raw lies outside
@@ -165,14 +180,53 @@ def parse_seeds(spec: str) -> list[int]:
     return seeds
 
 
-def held_out_losses(rows: list[dict], rule: list[dict]) -> list[dict]:
-    """Per held-out capture: the candidate the rule picks for its sigma and its loss (capture_loss)."""
+def held_out_losses(rows: list[dict], rule, view: str = "both") -> list[dict]:
+    """Per held-out capture: the candidate the rule picks for its sigma, its loss on ``view``
+    (capture_loss) and what the best choice among the fixed methods would lose (oracle_loss).
+    ``rule``: sigma bands, or a rule file's contents (:func:`fit_rules`), whose content class
+    for ``view`` the capture's cross-lens ratio picks (lfcl.auto.content_class)."""
     out = []
     for r in rows:
-        picked = band_for(r["sigma"], rule)[0]["candidate"]
+        bands = rule
+        if isinstance(rule, dict):
+            bands = rule_bands(rule, view, content_class(rule, view, r.get("lens_ratio")))
+        picked = band_for(r["sigma"], bands)[0]["candidate"]
+        floor, best = oracle_loss(r, view)
         out.append({"scene": r["scene"], "seed": r["seed"], "lux": r["lux"], "candidate": picked,
-                    "loss_db": capture_loss(r, picked)})
+                    "loss_db": capture_loss(r, picked, view), "oracle_loss_db": floor, "oracle": best})
     return out
+
+
+def is_low_ratio(row: dict) -> bool:
+    """A capture whose content is like the real light fields' (lfcl.auto.LOW_RATIO_BELOW)."""
+    return row.get("lens_ratio") is not None and row["lens_ratio"] < LOW_RATIO_BELOW
+
+
+def fit_rules(rows: list[dict], within: float, low_ratio_views=("mean",)) -> dict:
+    """The rule file's rules: judged on both views (``rule``) and on each view alone (``rules_by_view``),
+    fitted on the captures of the default content class; and, where some training captures lie below
+    LOW_RATIO_BELOW, a rule per view of ``low_ratio_views`` fitted on those (``low_ratio``).
+
+    Only the mean image has a low-ratio rule by default: on it, a rule fitted on the rendered
+    ``antinous`` light field came within 0.58 dB on the real Lytro ``2067`` capture at every level,
+    where on the centre view it lost up to 2.95 dB there (docs/auto.md)."""
+    default = [r for r in rows if not is_low_ratio(r)]
+    low = [r for r in rows if is_low_ratio(r)]
+    rules = {"rule": fit_rule(default, within),
+             "rules_by_view": {view: fit_rule(default, within, view) for view in VIEWS if view != "both"}}
+    if low and low_ratio_views:
+        rules["low_ratio"] = {
+            "below": LOW_RATIO_BELOW, "fitted_on": sorted({r["scene"] for r in low}), "captures": len(low),
+            "rules_by_view": {view: fit_rule(low, within, view) for view in low_ratio_views}}
+    return rules
+
+
+def _views(spec: str) -> tuple[str, ...]:
+    views = tuple(part.strip() for part in spec.split(",") if part.strip())
+    unknown = [v for v in views if v not in VIEWS]
+    if unknown:
+        raise SystemExit(f"--low-ratio-views: unknown view {', '.join(unknown)}; choose from {', '.join(VIEWS)}")
+    return views
 
 
 def _paths(spec: str) -> list[str]:
@@ -182,6 +236,9 @@ def _paths(spec: str) -> list[str]:
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("-o", "--output", required=True)
+    parser.add_argument("--refit", metavar="JSON", default=None,
+                        help="fit on the scored training and held-out rows of an earlier output (its capture and "
+                             "candidate options are kept; the options below that say what to score are ignored)")
     parser.add_argument("--scenes", default="charts,deadleaves")
     parser.add_argument("--seeds", default="1,2")
     parser.add_argument("--procedural-seeds", default="2000-2011",
@@ -195,9 +252,43 @@ def main(argv=None):
     parser.add_argument("--lux", default="0.25,0.5,1,2,4,8,12,25,50,100,200")
     parser.add_argument("--lenses", default="64x64")
     parser.add_argument("--candidates", default=DEFAULT_CANDIDATES)
+    parser.add_argument("--low-ratio-views", default="mean", metavar="VIEWS",
+                        help="views (comma-separated; '' for none) that get a rule of their own for training captures "
+                             f"whose cross-lens ratio lies below {LOW_RATIO_BELOW:g} (content like the real light "
+                             "fields, e.g. from --lightfields)")
     parser.add_argument("--within", type=float, default=0.1,
                         help="dB a cheaper candidate may lose, in the worst case and on average")
     args = parser.parse_args(argv)
+    if args.refit:
+        out = _scored_rows(args.refit, args)
+    else:
+        out = _score(args)
+    rules = fit_rules(out["training"], args.within, _views(args.low_ratio_views))
+    out.update(rules)
+    if out.get("held_out"):
+        out["held_out_losses"] = held_out_losses(out["held_out"], rules)
+        out["held_out_losses_by_view"] = {view: held_out_losses(out["held_out"], rules, view)
+                                          for view in out["rules_by_view"]}
+    from ..imageio import write_json
+
+    write_json(args.output, out)
+    low = out.get("low_ratio", {}).get("rules_by_view", {})
+    for view, rule in (("both", out["rule"]), *out["rules_by_view"].items(), *((f"{v}, low ratio", r)
+                                                                            for v, r in low.items())):
+        for band in rule:
+            print(f"{view:6s} sigma {band['sigma_from']:.4g}-{band['sigma_to']:.4g}: {band['candidate']} "
+                  f"(worst loss {band['worst_loss_db']:.2f} dB, mean {band['mean_loss_db']:.2f} dB over "
+                  f"{band['captures']} captures)")
+    views = {"both": out.get("held_out_losses", []), **out.get("held_out_losses_by_view", {})}
+    for view, rows in views.items():
+        for row in rows:
+            print(f"held out ({view}): {row['scene']} seed {row['seed']} {row['lux']:g} lux: {row['candidate']} "
+                  f"loses {row['loss_db']:.2f} dB to the best fixed method (the best choice among them, "
+                  f"{row['oracle']}, {row['oracle_loss_db']:.2f} dB)")
+
+
+def _score(args) -> dict:
+    """Score every candidate on the training (and held-out) captures the options name."""
     began = time.perf_counter()
     lux = [float(v) for v in args.lux.split(",")]
     lenses = tuple(int(n) for n in args.lenses.split("x"))
@@ -205,24 +296,27 @@ def main(argv=None):
     scenes = args.scenes.split(",")
     rows = score_captures(training_captures(scenes, parse_seeds(args.seeds), parse_seeds(args.procedural_seeds), lux,
                                             lenses, _paths(args.lightfields)), candidates)
-    rule = fit_rule(rows, args.within)
-    out = {"generator": f"lfcl {__version__} python -m lfcl.bench.auto_rule", "args": vars(args),
-           "seconds": time.perf_counter() - began, "rule": rule, "training": rows}
+    out = {"generator": f"lfcl {__version__} python -m lfcl.bench.auto_rule", "args": vars(args), "training": rows}
     held_out = parse_seeds(args.held_out_seeds)
     if held_out:
         out["held_out"] = score_captures(training_captures(scenes, held_out, [], lux, lenses,
                                                            _paths(args.held_out_lightfields)), candidates)
-        out["held_out_losses"] = held_out_losses(out["held_out"], rule)
-    from ..imageio import write_json
+    out["seconds"] = time.perf_counter() - began
+    return out
 
-    write_json(args.output, out)
-    for band in rule:
-        print(f"sigma {band['sigma_from']:.4g}-{band['sigma_to']:.4g}: {band['candidate']} "
-              f"(worst loss {band['worst_loss_db']:.2f} dB, mean {band['mean_loss_db']:.2f} dB over "
-              f"{band['captures']} captures)")
-    for row in out.get("held_out_losses", []):
-        print(f"held out: {row['scene']} seed {row['seed']} {row['lux']:g} lux: {row['candidate']} "
-              f"loses {row['loss_db']:.2f} dB to the best fixed method")
+
+def _scored_rows(path: str, args) -> dict:
+    """The scored rows of an earlier output, its scoring options and time (``seconds``: the scoring's),
+    for fitting again with the fitting options of ``args``."""
+    import json
+
+    earlier = json.loads(Path(path).read_text())
+    fitting = {"output": args.output, "within": args.within, "low_ratio_views": args.low_ratio_views, "refit": str(path)}
+    out = {"generator": f"lfcl {__version__} python -m lfcl.bench.auto_rule", "args": {**earlier["args"], **fitting},
+           "training": earlier["training"], "seconds": earlier["seconds"]}
+    if earlier.get("held_out"):
+        out["held_out"] = earlier["held_out"]
+    return out
 
 
 if __name__ == "__main__":

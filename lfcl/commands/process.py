@@ -131,6 +131,7 @@ class ProcessSettings:
     def pipeline(self, callback=None):
         """The :class:`lfcl.stages.Pipeline` of these settings; ``callback``: per ADMM iteration (progress)."""
         from .. import __version__
+        from ..auto import view_for_outputs
         from ..stages import Decode, Demosaic, Grid, Outputs, Pipeline
 
         extra: dict = {"generator": f"lfcl {__version__} process"}
@@ -141,7 +142,8 @@ class ProcessSettings:
             Grid(pitch=self.pitch, calibration=self.calibration, white=self.white, pattern=self.pattern),
             Demosaic(self.method, lam=self.lam, iterations=self.iterations, strength=self.strength,
                      device=self.device, callback=callback, max_memory=self.max_memory,
-                     tolerance_db=self.tolerance_db, start=self.start, skip_flat=self.skip_flat),
+                     tolerance_db=self.tolerance_db, start=self.start, skip_flat=self.skip_flat,
+                     auto_view=view_for_outputs(self.outputs)),  # auto judges its choice on what is written
             Outputs(list(self.outputs), refocus=self.refocus or DEFAULT_REFOCUS, fmt=self.fmt,
                     previews=self.previews, metadata=extra),
         ])
