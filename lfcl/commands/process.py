@@ -34,7 +34,9 @@ RECIPE_KEYS = {"method": "method", "strength": "strength", "lam": "lambda", "ite
 
 _OPTIONS = (
     click.option("--method", default="admm-uv", show_default=True,
-                 type=click.Choice(METHODS), help="Demosaic/denoise method."),
+                 type=click.Choice(METHODS),
+                 help="Demosaic/denoise method. auto: chosen from the raw's noise level, judged on --outputs "
+                      "(center alone: the centre view; mean/refocus alone: the mean image; else both; docs/auto.md)."),
     click.option("--pitch", default=None, type=click.IntRange(min=2), show_default=str(DEFAULT_PITCH),
                  help="Pixels per microlens of an aligned square grid starting at the sensor's first pixel "
                       "(not with --calibration / --white)."),
