@@ -172,7 +172,7 @@ def capture_in_memory(meta: dict, lux: float) -> Capture:
     from .sim import simulate
 
     scene = meta["scene"]
-    kwargs = dict(lenses=tuple(meta["lenses"]), pitch=int(meta["pitch"][0]), pattern=meta["pattern"],
+    kwargs = dict(lenses=tuple(meta["lenses"]) if meta.get("lenses") else None, pitch=int(meta["pitch"][0]), pattern=meta["pattern"],
                   lux=lux, seed=int(meta["seed"]), vignetting=bool(meta.get("vignetting", {}).get("enabled", False)))
     if scene.get("kind") == "scene":
         sim = simulate(scene["name"], texture=scene.get("texture"), **kwargs)
@@ -191,12 +191,17 @@ def simulation_capture(sim) -> Capture:
                    list(sim.sensor.noise_profile()) * 3)
 
 
-def simulated_capture(lenses: int, lux: float, seed: int = 0, scene: str = "charts",
-                      lightfield: str | None = None) -> Capture:
-    """A square capture of ``lenses`` x ``lenses`` 9x9 lenses (GRBG) of a built-in scene, or of a
-    rendered or decoded light field (``lightfield``: an HCI-layout folder or .npy), in memory."""
-    source = {"kind": "lightfield", "path": lightfield} if lightfield else {"kind": "scene", "name": scene}
-    meta = {"scene": source, "lenses": [lenses] * 2, "pitch": [9, 9], "pattern": "GRBG", "seed": seed}
+def simulated_capture(lenses: int | None, lux: float, seed: int = 0, scene: str = "charts",
+                      lightfield: str | None = None, texture: str | None = None) -> Capture:
+    """A square capture of ``lenses`` x ``lenses`` 9x9 lenses (GRBG) of a built-in scene (its planes
+    textured with the image ``texture``, if given), or of a rendered or decoded light field
+    (``lightfield``: an HCI-layout folder or .npy), in memory.
+    ``lenses=None`` (light fields only): every lens of the light field, its full frame."""
+    source = {"kind": "lightfield", "path": lightfield} if lightfield else {"kind": "scene", "name": scene,
+                                                                           "texture": texture}
+    if lenses is None and not lightfield:
+        raise ValueError(f"a built-in scene ({scene}) needs a number of lenses; only a light field has a full frame")
+    meta = {"scene": source, "lenses": None if lenses is None else [lenses] * 2, "pitch": [9, 9], "pattern": "GRBG", "seed": seed}
     return capture_in_memory(meta, lux)
 
 

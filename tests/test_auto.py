@@ -129,7 +129,7 @@ def test_auto_check_scores_the_shipped_rule_on_a_capture(tmp_path, capsys, view)
     assert (checked["oracle_loss_db"], checked["oracle"]) == pytest.approx(oracle_loss(row, view))
     assert checked["auto_psnr"][0] == pytest.approx(row["results"][checked["auto"]]["psnr_center"])
     assert checked["lens_ratio"] == row["lens_ratio"]
-    assert checked["seen_content"] == choose(row["sigma"], lens_ratio=row["lens_ratio"]).seen_content
+    assert checked["seen_content"] == choose(row["sigma"], lens_ratio=row["lens_ratio"], view=view).seen_content
     assert "within 0.2 dB at" in capsys.readouterr().out
 
 
@@ -144,6 +144,59 @@ def test_training_captures_take_light_fields_at_every_seed(tmp_path):
     crop = data[1:5, 1:4]  # the centre 4x3 lenses
     np.testing.assert_allclose(first.truth / first.truth.mean(), crop / crop.mean(), rtol=1e-4)
     assert first.mosaic.shape == (36, 27) and not np.array_equal(first.mosaic, second.mosaic)  # new noise per seed
+
+
+def test_capture_options_take_a_light_fields_full_frame(tmp_path):
+    import argparse
+
+    from lfcl.bench.auto_check import capture_label
+    from lfcl.bench.timing import add_capture_arguments, captures
+
+    data = np.random.default_rng(5).random((6, 5, 9, 9, 3)).astype(np.float32) + 0.1
+    np.save(tmp_path / "mine.npy", data)
+    parser = argparse.ArgumentParser()
+    add_capture_arguments(parser, "malvar")
+    args = parser.parse_args(["--lightfield", str(tmp_path / "mine.npy"), "--lenses", "full,4", "--lux", "12"])
+    (full_lenses, scene, _, full), (crop_lenses, _, _, crop) = captures(args)
+    assert (full_lenses, crop_lenses) == (None, 4)
+    assert full.mosaic.shape == (54, 45) and crop.mosaic.shape == (36, 36)  # every lens, then the centre 4x4
+    np.testing.assert_allclose(full.truth / full.truth.mean(), data / data.mean(), rtol=1e-4)
+    assert capture_label(scene, None) == "mine.npy (full frame)" and capture_label(scene, 4) == "mine.npy"
+
+
+def test_a_built_in_scene_has_no_full_frame():
+    import argparse
+
+    from lfcl.bench.timing import add_capture_arguments, captures
+    from lfcl.evaluate import simulated_capture
+
+    with pytest.raises(ValueError, match="only a light field has a full frame"):
+        simulated_capture(None, 12.0, scene="charts")
+    parser = argparse.ArgumentParser()
+    add_capture_arguments(parser, "malvar")
+    with pytest.raises(SystemExit, match="--lenses full needs --lightfield"):
+        list(captures(parser.parse_args(["--scenes", "charts", "--lenses", "full"])))
+
+
+def test_capture_options_texture_every_scene_with_every_image(tmp_path):
+    import argparse
+
+    from lfcl.bench.auto_check import capture_label
+    from lfcl.bench.timing import add_capture_arguments, captures
+    from lfcl.imageio import write_image
+
+    for k in range(2):
+        write_image(tmp_path / f"photo{k}.png", np.random.default_rng(k).random((30, 40, 3)).astype(np.float32))
+    parser = argparse.ArgumentParser()
+    add_capture_arguments(parser, "malvar")
+    textures = f"{tmp_path / 'photo0.png'},{tmp_path / 'photo1.png'}"
+    made = list(captures(parser.parse_args(["--scenes", "charts", "--texture", textures, "--lenses", "6",
+                                            "--lux", "12"])))
+    assert [capture.meta["scene"]["texture"] for *_, capture in made] == textures.split(",")
+    assert not np.allclose(made[0][3].truth, made[1][3].truth)
+    assert capture_label("charts", 6, made[1][3].meta["scene"]["texture"]) == "charts + photo1.png"
+    with pytest.raises(SystemExit, match="a --lightfield has none"):
+        list(captures(parser.parse_args(["--lightfield", str(tmp_path), "--texture", textures])))
 
 
 def test_fit_rule_breaks_ties_of_the_worst_loss_by_the_mean_loss_before_the_cost():
@@ -176,7 +229,8 @@ def test_shipped_rule_is_what_the_fit_gives_on_its_own_training_rows():
     from lfcl.bench.auto_rule import fit_rules
 
     shipped = json.loads(resources.files("lfcl.data").joinpath("auto_rule.json").read_text())
-    refit = fit_rules(shipped["training"], shipped["args"]["within"], shipped["args"]["low_ratio_views"].split(","))
+    refit = fit_rules(shipped["training"], shipped["args"]["within"], shipped["args"]["low_ratio_views"].split(","),
+                      shipped.get("view_training"))
 
     def picks(rules):
         return {key: [b["candidate"] for b in bands] for key, bands in (
@@ -249,6 +303,49 @@ def test_auto_rule_refit_fits_the_scored_rows_again(tmp_path, capsys):
     assert [b["candidate"] for b in refit["rules_by_view"]["mean"]] == ["admm-uvst@1"]
     assert refit["held_out_losses_by_view"]["center"][0]["loss_db"] == 0.0
     assert "held out (mean): charts seed 0 12 lux: admm-uvst@1 loses 0.00 dB" in capsys.readouterr().out
+
+
+def test_auto_rule_refit_adds_and_drops_scored_rows(tmp_path):
+    import json
+
+    from lfcl.bench.auto_rule import main
+
+    synthetic = dict(_row(0.005, {"admm-uv@1": (41.0, 44.0, 0.1), "admm-uvst@1": (39.0, 46.0, 0.2)}),
+                     scene="procedural")
+    earlier = {"args": {"scenes": "charts", "within": 0.1}, "seconds": 1.0, "training": [synthetic]}
+    (tmp_path / "earlier.json").write_text(json.dumps(earlier))
+    photo = dict(_row(0.0051, {"admm-uv@1": (38.0, 44.0, 0.1), "admm-uvst@1": (40.0, 46.0, 0.2)}),
+                 scene="charts + photo.dng", seed=1, lux=12)
+    (tmp_path / "photos.json").write_text(json.dumps({"rows": [photo]}))
+    held = dict(photo, scene="charts + other.dng", seed=0)
+    (tmp_path / "held.json").write_text(json.dumps({"rows": [held]}))
+
+    def refit(*extra):
+        main(["--refit", str(tmp_path / "earlier.json"), "-o", str(tmp_path / "rule.json"), *extra])
+        return json.loads((tmp_path / "rule.json").read_text())
+
+    assert [b["candidate"] for b in refit()["rules_by_view"]["center"]] == ["admm-uv@1"]
+    both = refit("--add-training", str(tmp_path / "photos.json"))
+    assert [r["scene"] for r in both["training"]] == ["procedural", "charts + photo.dng"]
+    assert both["rules_by_view"]["center"][0]["captures"] == 2
+    photos_only = refit("--add-training", str(tmp_path / "photos.json"), "--drop-training", "proc*",
+                        "--add-held-out", str(tmp_path / "held.json"))
+    assert [r["scene"] for r in photos_only["training"]] == ["charts + photo.dng"]
+    assert [b["candidate"] for b in photos_only["rules_by_view"]["center"]] == ["admm-uvst@1"]
+    assert photos_only["held_out_losses_by_view"]["center"][0]["scene"] == "charts + other.dng"
+    assert photos_only["args"]["drop_training"] == "proc*"
+    per_view = refit("--add-training", str(tmp_path / "photos.json"), "--view-training", "center=* + *")
+    assert [b["candidate"] for b in per_view["rules_by_view"]["center"]] == ["admm-uvst@1"]  # the photo alone
+    assert [b["candidate"] for b in both["rules_by_view"]["center"]] == ["admm-uv@1"]  # both captures: a tie
+    assert per_view["view_training"] == {"center": ["* + *"]} and per_view["rules_by_view"]["center"][0]["captures"] == 1
+    with pytest.raises(SystemExit, match="no training capture"):
+        refit("--view-training", "mean=nothing*")
+    with pytest.raises(SystemExit, match="VIEW=PATTERN"):
+        refit("--view-training", "centre=*")
+    other = dict(photo, results={"malvar": photo["results"]["admm-uv@1"]})
+    (tmp_path / "other.json").write_text(json.dumps({"rows": [other]}))
+    with pytest.raises(SystemExit, match="other candidates"):
+        refit("--add-training", str(tmp_path / "other.json"))
 
 
 def test_auto_runs_the_chosen_method_and_records_why(rng):

@@ -222,6 +222,32 @@ def test_texture_image_on_planes(tmp_path):
     assert not np.allclose(lf, render_scene("charts", (10, 10), 9))
 
 
+def test_a_camera_raw_textures_a_plane_developed_linear(tmp_path):
+    """A raw OpenImageIO cannot read is developed by LibRaw: full size, linear, not brightened."""
+    dim = write_capture(simulate("charts", lenses=(6, 7), lux=6.0, seed=3), tmp_path / "dim") / "raw.dng"
+    bright = write_capture(simulate("charts", lenses=(6, 7), lux=12.0, seed=3), tmp_path / "bright") / "raw.dng"
+    dim_rgb, bright_rgb = read_linear(dim), read_linear(bright)
+    assert dim_rgb.shape == (54, 63, 3) and dim_rgb.dtype == np.float32
+    assert dim_rgb.min() >= 0.0 and bright_rgb.max() <= 1.0
+    assert bright_rgb.mean() / dim_rgb.mean() == pytest.approx(2.0, rel=0.05)  # twice the light, twice the value
+    lf = render_scene("charts", (10, 10), 9, texture=bright)
+    assert lf.shape == (10, 10, 9, 9, 3) and np.all(np.isfinite(lf))
+
+
+def test_a_file_neither_reads_says_both_failed(tmp_path):
+    junk = tmp_path / "photo.cr2"
+    junk.write_bytes(b"not a raw at all" * 64)
+    with pytest.raises(ValueError, match="nor is it a camera raw LibRaw reads"):
+        read_linear(junk)
+
+
+def test_a_tiff_based_raw_is_developed_not_read_as_its_thumbnail():
+    kdc = ANTINOUS.parents[1] / "digicam_corpus" / "Kodak_DC120_P003908_uncompressed.KDC"
+    if not kdc.is_file():
+        pytest.skip(f"{kdc} is not present (../shared/realdata)")
+    assert read_linear(kdc).shape == (976, 1301, 3)  # OpenImageIO alone opens its 80-pixel-wide thumbnail
+
+
 # --- light-field loading ---------------------------------------------------
 
 def make_hci(folder: Path, side=3, h=5, w=4):

@@ -23,6 +23,7 @@ views), the raw's cross-lens ratio and whether the rule's band was fitted on suc
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ..auto import VIEWS, choose, load_rules, rule_bands
@@ -64,6 +65,18 @@ def format_check(checked: list[dict]) -> str:
                          "oracle dB", "cross-lens ratio", "malvar dB"], rows, "lrrlrrrrrrr")
 
 
+def _progress(line: str) -> None:
+    """Each scored capture on stderr as it finishes (a full frame takes minutes), the table on stdout."""
+    print(line, file=sys.stderr, flush=True)
+
+
+def capture_label(scene: str, lenses: int | None, texture: str | None = None) -> str:
+    """The scene's name in the tables, with its texture's file name (``--texture``); a light field's
+    full frame (``--lenses full``) says so."""
+    return (Path(scene).name + (f" + {Path(texture).name}" if texture else "")
+            + (" (full frame)" if lenses is None else ""))
+
+
 def _content(checked: dict) -> str:
     """The raw's cross-lens ratio and whether the rule's band was fitted on such content."""
     if checked["lens_ratio"] is None:
@@ -89,8 +102,9 @@ def main(argv=None):
         parser.error(f"--methods must hold every candidate the rule picks; missing {', '.join(missing)}")
     if not any(is_fixed(name) for name in names):
         parser.error("--methods must hold at least one method at its default strength (the peers)")
-    scored = score_captures(((Path(scene).name, args.seed, lux, capture) for _, scene, lux, capture in captures(args)),
-                            candidates, log=lambda line: None)
+    scored = score_captures(((capture_label(scene, lenses, capture.meta["scene"].get("texture")), args.seed, lux,
+                              capture)
+                             for lenses, scene, lux, capture in captures(args)), candidates, log=_progress)
     checked = check_rows(scored, rules, args.view)
     print(format_check(checked))
     worst = max(checked, key=lambda r: r["loss_db"])

@@ -15,7 +15,11 @@ losses judged on the worse of the two views (``rule``, what ``auto`` runs by def
 and on each view alone (``rules_by_view``, for runs that write only that view:
 lfcl.auto.view_for_outputs). ``--held-out-seeds`` scores the same candidates on other
 captures and prints what the fitted rules lose there. ``--refit JSON`` fits again on the
-scored rows of an earlier output instead of scoring anew.
+scored rows of an earlier output instead of scoring anew; ``--add-training`` and
+``--add-held-out`` bring in rows that ``python -m lfcl.bench.auto_check --json`` scored (raws of
+photographs via ``--texture``, light fields' full frames via ``--lenses full``), ``--drop-training``
+leaves scenes out and ``--view-training`` fits one view's rule on some scenes only (the shipped
+mean-image rule: the photographs, docs/auto.md).
 
 The training seeds (default 1, 2) are not the evaluation seed 0 of docs/admm.md.
 
@@ -25,6 +29,7 @@ The training seeds (default 1, 2) are not the evaluation seed 0 of docs/admm.md.
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import math
 import time
 from pathlib import Path
@@ -202,18 +207,30 @@ def is_low_ratio(row: dict) -> bool:
     return row.get("lens_ratio") is not None and row["lens_ratio"] < LOW_RATIO_BELOW
 
 
-def fit_rules(rows: list[dict], within: float, low_ratio_views=("mean",)) -> dict:
+def fit_rules(rows: list[dict], within: float, low_ratio_views=("mean",), view_training=None) -> dict:
     """The rule file's rules: judged on both views (``rule``) and on each view alone (``rules_by_view``),
     fitted on the captures of the default content class; and, where some training captures lie below
     LOW_RATIO_BELOW, a rule per view of ``low_ratio_views`` fitted on those (``low_ratio``).
+    ``view_training`` {view: scene patterns}: that view's default rule is fitted on the captures of
+    those scenes only (:func:`scenes_matching`).
 
     Only the mean image has a low-ratio rule by default: on it, a rule fitted on the rendered
     ``antinous`` light field came within 0.58 dB on the real Lytro ``2067`` capture at every level,
     where on the centre view it lost up to 2.95 dB there (docs/auto.md)."""
     default = [r for r in rows if not is_low_ratio(r)]
     low = [r for r in rows if is_low_ratio(r)]
-    rules = {"rule": fit_rule(default, within),
-             "rules_by_view": {view: fit_rule(default, within, view) for view in VIEWS if view != "both"}}
+    view_training = view_training or {}
+
+    def fitted(view: str) -> list[dict]:
+        chosen = scenes_matching(default, view_training[view]) if view in view_training else default
+        if not chosen:
+            raise SystemExit(f"no training capture of the default content class matches "
+                             f"{', '.join(view_training[view])} for the {view} rule")
+        return fit_rule(chosen, within, view)
+
+    rules = {"rule": fitted("both"), "rules_by_view": {view: fitted(view) for view in VIEWS if view != "both"}}
+    if view_training:
+        rules["view_training"] = {view: list(patterns) for view, patterns in view_training.items()}
     if low and low_ratio_views:
         rules["low_ratio"] = {
             "below": LOW_RATIO_BELOW, "fitted_on": sorted({r["scene"] for r in low}), "captures": len(low),
@@ -258,12 +275,28 @@ def main(argv=None):
                              "fields, e.g. from --lightfields)")
     parser.add_argument("--within", type=float, default=0.1,
                         help="dB a cheaper candidate may lose, in the worst case and on average")
+    parser.add_argument("--add-training", default="", metavar="JSONS",
+                        help="scored rows (comma-separated files: `auto_check --json` outputs, e.g. raws of photographs "
+                             "via --texture or full frames via --lenses full) that join the training captures")
+    parser.add_argument("--add-held-out", default="", metavar="JSONS",
+                        help="scored rows (as --add-training) that join the held-out captures")
+    parser.add_argument("--drop-training", default="", metavar="SCENES",
+                        help="scene names (comma-separated shell patterns, e.g. 'procedural' or '* + *') whose "
+                             "training captures the fit leaves out")
+    parser.add_argument("--view-training", action="append", default=[], metavar="VIEW=SCENES",
+                        help="fit VIEW's rule (both, center or mean) on the training captures of these scenes only "
+                             "(shell patterns as --drop-training; repeatable); the other views take every capture")
     args = parser.parse_args(argv)
     if args.refit:
         out = _scored_rows(args.refit, args)
     else:
         out = _score(args)
-    rules = fit_rules(out["training"], args.within, _views(args.low_ratio_views))
+    out["training"] = _dropped(out["training"] + _added_rows(_paths(args.add_training), out["training"]),
+                               _paths(args.drop_training))
+    held = out.get("held_out", []) + _added_rows(_paths(args.add_held_out), out["training"])
+    if held:
+        out["held_out"] = held
+    rules = fit_rules(out["training"], args.within, _views(args.low_ratio_views), _view_training(args.view_training))
     out.update(rules)
     if out.get("held_out"):
         out["held_out_losses"] = held_out_losses(out["held_out"], rules)
@@ -305,13 +338,61 @@ def _score(args) -> dict:
     return out
 
 
+def _added_rows(paths: list[str], like: list[dict]) -> list[dict]:
+    """The scored rows of ``auto_check --json`` outputs (or of auto_rule outputs: their training rows),
+    refused unless they scored the same candidates as ``like``."""
+    import json
+
+    rows = []
+    for path in paths:
+        saved = json.loads(Path(path).read_text())
+        found = saved.get("rows", saved.get("training"))
+        if not found:
+            raise SystemExit(f"{path} holds no scored rows (an `auto_check --json` or auto_rule output)")
+        rows += found
+    names = set(like[0]["results"]) if like else None
+    for row in rows:
+        if names is not None and set(row["results"]) != names:
+            raise SystemExit(f"scored rows of {row['scene']} at {row['lux']:g} lux hold other candidates than the "
+                             f"training rows: score them with the same --methods / --candidates")
+    return rows
+
+
+def scenes_matching(rows: list[dict], patterns) -> list[dict]:
+    """The rows whose scene name matches one of the shell-style ``patterns`` (``procedural``,
+    ``* + *``: the built-in scenes textured with a photograph)."""
+    return [r for r in rows if any(fnmatch.fnmatchcase(r["scene"], p) for p in patterns)]
+
+
+def _dropped(rows: list[dict], patterns: list[str]) -> list[dict]:
+    """``rows`` without the scenes ``patterns`` match (:func:`scenes_matching`)."""
+    if not patterns:
+        return rows
+    dropped = {id(r) for r in scenes_matching(rows, patterns)}
+    return [r for r in rows if id(r) not in dropped]
+
+
+def _view_training(specs: list[str]) -> dict:
+    """``--view-training VIEW=PATTERN,...`` options -> {view: patterns}."""
+    out = {}
+    for spec in specs:
+        view, _, patterns = spec.partition("=")
+        if view not in VIEWS or not patterns.strip():
+            raise SystemExit(f"--view-training wants VIEW=PATTERN[,PATTERN...] with a view of {', '.join(VIEWS)}, "
+                             f"got {spec!r}")
+        out[view] = _paths(patterns)
+    return out
+
+
 def _scored_rows(path: str, args) -> dict:
     """The scored rows of an earlier output, its scoring options and time (``seconds``: the scoring's),
     for fitting again with the fitting options of ``args``."""
     import json
 
     earlier = json.loads(Path(path).read_text())
-    fitting = {"output": args.output, "within": args.within, "low_ratio_views": args.low_ratio_views, "refit": str(path)}
+    fitting = {"output": args.output, "within": args.within, "low_ratio_views": args.low_ratio_views, "refit": str(path),
+               "add_training": args.add_training, "add_held_out": args.add_held_out,
+               "drop_training": args.drop_training, "view_training": args.view_training}
     out = {"generator": f"lfcl {__version__} python -m lfcl.bench.auto_rule", "args": {**earlier["args"], **fitting},
            "training": earlier["training"], "seconds": earlier["seconds"]}
     if earlier.get("held_out"):

@@ -108,12 +108,16 @@ def format_table(headers: list[str], rows: list[list[str]], align: str | None = 
 
 def add_capture_arguments(parser, methods: str) -> None:
     """The options that say which simulated captures a scene benchmark runs on (``--lenses``,
-    ``--scenes`` or ``--lightfield``, ``--lux``, ``--seed``) and ``--methods`` (default ``methods``)."""
-    parser.add_argument("--lenses", default="64,160")
+    ``--scenes`` (with ``--texture``) or ``--lightfield``, ``--lux``, ``--seed``) and ``--methods`` (default ``methods``)."""
+    parser.add_argument("--lenses", default="64,160",
+                        help="lenses per side, comma-separated; 'full' (with --lightfield): the whole light field")
     parser.add_argument("--scenes", default="charts,deadleaves")
     parser.add_argument("--lightfield", default=None, metavar="PATH",
                         help="a rendered or decoded light field (HCI-layout folder or .npy, 9x9 views) to simulate "
                              "raws from, instead of --scenes")
+    parser.add_argument("--texture", default=None, metavar="IMAGES",
+                        help="images (comma-separated; anything OpenImageIO reads, or a camera raw) mapped onto the "
+                             "planes of every --scenes scene, one capture per image (lfcl simulate --texture)")
     parser.add_argument("--lux", default="2,12,50")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--methods", default=methods)
@@ -123,7 +127,14 @@ def captures(args):
     """(lenses, scene, lux, capture) for every capture :func:`add_capture_arguments` names, in memory."""
     from ..evaluate import simulated_capture
 
-    for lenses in (int(v) for v in args.lenses.split(",")):
+    textures = args.texture.split(",") if args.texture else [None]
+    if args.lightfield and textures != [None]:
+        raise SystemExit("--texture maps images onto the built-in scenes' planes; a --lightfield has none")
+    for lenses in (None if v == "full" else int(v) for v in args.lenses.split(",")):
+        if lenses is None and not args.lightfield:
+            raise SystemExit("--lenses full needs --lightfield: a built-in scene has no full frame")
         for scene in [args.lightfield] if args.lightfield else args.scenes.split(","):
-            for lux in (float(v) for v in args.lux.split(",")):
-                yield lenses, scene, lux, simulated_capture(lenses, lux, args.seed, scene, args.lightfield)
+            for texture in textures:
+                for lux in (float(v) for v in args.lux.split(",")):
+                    yield lenses, scene, lux, simulated_capture(lenses, lux, args.seed, scene, args.lightfield,
+                                                                texture)

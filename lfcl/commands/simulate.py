@@ -14,7 +14,8 @@ from . import user_errors
 @click.option("--scene", default="charts", show_default=True, metavar="NAME",
               help="Built-in scene: charts (three resolution charts at different depths) or deadleaves.")
 @click.option("--texture", type=click.Path(path_type=Path, readable=False), default=None, metavar="IMAGE",
-              help="Image mapped onto the scene's planes instead of their textures (8/16-bit: sRGB, decoded to linear).")
+              help="Image mapped onto the scene's planes instead of their textures (8/16-bit: sRGB, decoded to linear; "
+                   "a camera raw: developed linear by LibRaw).")
 @click.option("--lightfield", type=click.Path(path_type=Path, readable=False), default=None, metavar="PATH",
               help="An existing light field instead of a scene: a folder of HCI views input_Cam000.png... "
                    "(row-major over u, v) or a .npy [S, T, U, V, 3]; its own S, T, U, V are used.")

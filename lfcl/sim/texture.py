@@ -4,7 +4,9 @@
 are taken as sRGB-encoded and decoded to linear with colour-science's
 ``cctf_decoding(..., function="sRGB")`` (through a lookup table of every code
 value, so it is exact and fast); float files (EXR, float TIFF) are taken as
-linear already. Grey images are replicated to RGB, alpha is dropped, negative
+linear already. Camera raws that OpenImageIO cannot open (CRW, NEF, most DNGs)
+are developed by LibRaw (rawpy) to linear sRGB with the camera's white balance
+and no brightening, so a photograph's own scene statistics can texture a plane. Grey images are replicated to RGB, alpha is dropped, negative
 values are clipped to 0.
 
 :class:`ImageTexture` maps an image onto a plane: the image is scaled to
@@ -22,6 +24,10 @@ import numpy as np
 import OpenImageIO as oiio
 
 PIXELS_PER_LENS = 4
+#: Image files OpenImageIO opens first; any other file is tried as a camera raw first (a TIFF-based
+#: raw such as a Kodak KDC opens in OpenImageIO as its embedded thumbnail).
+IMAGE_SUFFIXES = frozenset((".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr", ".hdr", ".bmp", ".ppm", ".pgm",
+                            ".pnm", ".pfm", ".webp", ".gif", ".tga", ".dpx", ".jp2", ".psd", ".sgi", ".fits"))
 
 
 def _decode_lut(bits: int) -> np.ndarray:
@@ -59,9 +65,15 @@ def read_linear(path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"cannot read image {path}: no such file")
+    if path.suffix.lower() not in IMAGE_SUFFIXES:  # a camera raw: OpenImageIO may read only its thumbnail
+        try:
+            return _finite_rgb(_develop_raw(path, "not an image file"), path)
+        except ValueError:
+            pass  # not a raw after all: OpenImageIO may still know the format
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
-        raise ValueError(f"cannot read image {path}: {oiio.geterror().strip() or 'unknown format'}")
+        reason = oiio.geterror().strip() or "unknown format"
+        return _finite_rgb(_develop_raw(path, reason), path)
     try:
         spec = inp.spec()
         base = spec.format.basetype
@@ -78,11 +90,30 @@ def read_linear(path) -> np.ndarray:
             pixels = _to_rgb(np.asarray(pixels, dtype=np.float32), path)
     finally:
         inp.close()
+    return _finite_rgb(pixels, path)
+
+
+def _finite_rgb(pixels: np.ndarray, path) -> np.ndarray:
     if pixels.size == 0:
         raise ValueError(f"image {path} is empty")
     if not np.all(np.isfinite(pixels)):
         raise ValueError(f"image {path} holds NaN or Inf values")
     return np.ascontiguousarray(np.clip(pixels, 0.0, None), dtype=np.float32)
+
+
+def _develop_raw(path: Path, reason: str) -> np.ndarray:
+    """A camera raw developed by LibRaw to linear sRGB in [0, 1] (camera white balance, no
+    brightening, 16 bits); ``ValueError`` naming OpenImageIO's ``reason`` if LibRaw cannot read it either."""
+    import rawpy
+
+    try:
+        with rawpy.imread(str(path)) as raw:
+            developed = raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16, use_camera_wb=True,
+                                        output_color=rawpy.ColorSpace.sRGB)
+    except (rawpy.LibRawError, OSError, RuntimeError) as exc:
+        raise ValueError(f"cannot read image {path}: {reason} (nor is it a camera raw LibRaw reads: "
+                         f"{type(exc).__name__})") from None
+    return _to_rgb(np.asarray(developed, dtype=np.float32) / 65535.0, path)
 
 
 def area_resize(image: np.ndarray, height: int, width: int) -> np.ndarray:
