@@ -5,8 +5,9 @@ What each does and its defaults: lfcl/methods.py.
 
 METHODS = ("auto", "malvar", "admm-uv", "admm-st", "admm-uvst", "linear4d", "admm-uv-xc", "admm-uvst-xc")
 
-#: The ADMM methods' first estimates: the paper's Malvar, the learned 4D filter, Malvar bounded to each lens.
-STARTS = ("malvar", "linear4d", "lens-malvar")
+#: The ADMM methods' first estimates: the paper's Malvar, the learned 4D filter, Malvar bounded to each lens,
+#: and the learned filter with Malvar in the lenses where the two disagree far more than elsewhere.
+STARTS = ("malvar", "linear4d", "lens-malvar", "guarded")
 
 #: The methods whose prior couples no two lenses, so that flat lenses can leave the solve
 #: (lfcl/flat_lenses.py), and the chi-square p-value above which a lens counts as flat.

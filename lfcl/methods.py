@@ -258,9 +258,11 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     ``start`` (ADMM methods): the first estimate, ``"malvar"`` (the paper's, and the
     default), ``"linear4d"`` (the learned 4D filter, which also reads the neighbouring
     lenses: measured in docs/auto.md, it gains on textured and multi-plane scenes and
-    loses on large flat in-focus patches) or ``"lens-malvar"`` (Malvar bounded to each
-    lens, so that no filter mixes two micro-images; docs/auto.md). ``auto`` takes the
-    start its rule names.
+    loses on large flat in-focus patches), ``"lens-malvar"`` (Malvar bounded to each
+    lens, so that no filter mixes two micro-images; docs/auto.md) or ``"guarded"`` (linear4d, with
+    Malvar in the lenses where the two disagree far more than in the rest of the frame: high-contrast
+    edges and clipped highlights, where linear4d breaks; lfcl/guarded_start.py, recorded in
+    ``parameters["start_guard"]``). ``auto`` takes the start its rule names.
     ``auto_view`` (``auto`` only): the view its rule was judged on, ``"both"`` (the worse of
     the centre view and the mean image), ``"center"`` or ``"mean"`` (lfcl.auto.view_for_outputs:
     a run that writes only that view).
@@ -315,11 +317,18 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         return DemosaicResult(planes, method, {}, 0, time.perf_counter() - began, "direct", [], noise)
     b = runtime.to_device(mosaic)
     start = "malvar" if method == "malvar" else start or "malvar"
-    if start == "linear4d":
+    guard = None
+    if start in ("linear4d", "guarded"):
         from .ops.linear4d import linear4d_operator
 
         noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
         x0 = linear4d_operator(runtime, mosaic, pattern, pitch, origin, noise).forward(b)
+        if start == "guarded":  # Malvar in the lenses where linear4d breaks (lfcl/guarded_start.py)
+            from .guarded_start import guarded_planes
+
+            malvar = Malvar(runtime, mosaic.shape, pattern, origin).forward(b)
+            planes, guard = guarded_planes(x0.get(), malvar.get(), mosaic, pitch, noise)
+            x0 = runtime.to_device(planes)
     else:  # lens-malvar: Malvar bounded to each lens, so that no filter reads a neighbouring micro-image
         x0 = Malvar(runtime, mosaic.shape, pattern, origin, lens=pitch if start == "lens-malvar" else None).forward(b)
     if method == "malvar":
@@ -434,6 +443,8 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         f"(last band: {runs[-1].stop_reason})")
     parameters = dataclasses.asdict(params)
     parameters["start"] = start
+    if guard is not None:
+        parameters["start_guard"] = guard
     if found is not None:
         parameters["flat_lenses"] = found.as_dict(packing.grid[0] if packing is not None else None)
     elif dims == "uv":

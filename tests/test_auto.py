@@ -398,6 +398,7 @@ def test_tolerance_db_must_be_positive():
 
 
 @pytest.mark.parametrize("candidate, ran", [("admm-uv-xc@2:linear4d", ("admm-uv-xc", 2.0)),
+                                            ("admm-uv-xc@1:guarded", ("admm-uv-xc", 1.0)),
                                             ("linear4d", ("admm-uv", 1.0))])
 def test_auto_without_linear4d_coefficients_for_the_pitch_runs_from_malvar(rng, monkeypatch, candidate, ran):
     import lfcl.auto
@@ -410,7 +411,7 @@ def test_auto_without_linear4d_coefficients_for_the_pitch_runs_from_malvar(rng, 
     auto = demosaic_lightfield(mosaic, "GRBG", (5, 5), "auto", noise=noise)
     record = auto.parameters["auto"]
     assert (record["method"], record["strength"], record["start"]) == (*ran, "malvar")
-    assert record["replaced"]["start" if candidate != "linear4d" else "method"] == "linear4d"
+    assert record["replaced"]["start" if candidate != "linear4d" else "method"] == candidate.rpartition(":")[2]
     assert "coefficients for 9x9 lenses only, not 5x5" in record["reason"]
     direct = demosaic_lightfield(mosaic, "GRBG", (5, 5), ran[0], noise=noise, strength=ran[1])
     np.testing.assert_array_equal(auto.planes, direct.planes)

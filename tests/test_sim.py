@@ -234,6 +234,15 @@ def test_a_camera_raw_textures_a_plane_developed_linear(tmp_path):
     assert lf.shape == (10, 10, 9, 9, 3) and np.all(np.isfinite(lf))
 
 
+def test_a_camera_raw_texture_declaring_too_many_pixels_is_refused(tmp_path, monkeypatch):
+    import lfcl.raw
+
+    dng = write_capture(simulate("charts", lenses=(6, 7), lux=6.0, seed=3), tmp_path / "cap") / "raw.dng"
+    monkeypatch.setattr(lfcl.raw, "MAX_PIXELS", 54 * 63 - 1)
+    with pytest.raises(ValueError, match="declares 3402 pixels, more than the limit"):
+        read_linear(dng)
+
+
 def test_a_file_neither_reads_says_both_failed(tmp_path):
     junk = tmp_path / "photo.cr2"
     junk.write_bytes(b"not a raw at all" * 64)

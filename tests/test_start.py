@@ -1,4 +1,5 @@
-"""The ADMM methods' first estimate: ``start="malvar"`` (the paper's), ``"linear4d"`` or ``"lens-malvar"``."""
+"""The ADMM methods' first estimate: ``start="malvar"`` (the paper's), ``"linear4d"``, ``"lens-malvar"``
+or ``"guarded"``."""
 
 from __future__ import annotations
 
@@ -64,6 +65,55 @@ def test_lens_malvar_start_is_admm_from_the_lens_bounded_malvar_planes(textured_
     assert np.linalg.norm(from_malvar.x - expected.x) > 10 * np.linalg.norm(got.planes - expected.x)
 
 
+def test_guarded_disagreement_is_the_rms_difference_in_noise_sigmas():
+    from lfcl.guarded_start import disagreement
+
+    mosaic = np.full((18, 27), 0.25, np.float32)  # 2x3 lenses of 9x9
+    noise = NoiseEstimate(gain=0.0016, floor=0.0001**2, sigma=0.02, source="test")
+    linear, malvar = np.zeros((3, 18, 27), np.float32), np.zeros((3, 18, 27), np.float32)
+    linear[1, 9:18, 0:9] = 0.06  # lens (1, 0): one colour of three differs by 0.06 everywhere
+    d = disagreement(linear, malvar, mosaic, (9, 9), noise)
+    sigma = np.sqrt(0.0016 * 0.25 + 0.0001**2)
+    expected = np.zeros((2, 3))
+    expected[1, 0] = np.sqrt(0.06**2 / 3) / sigma
+    np.testing.assert_allclose(d, expected, rtol=1e-5)
+
+
+def test_guarded_lenses_are_the_frames_outliers_and_their_neighbours():
+    from lfcl.guarded_start import malvar_lenses
+
+    d = np.full((6, 7), 2.0)
+    d[3, 5] = 7.0  # above 3 x the median 2
+    d[0, 0] = 5.5  # below it
+    chosen = malvar_lenses(d, factor=3.0)
+    expected = np.zeros((6, 7), bool)
+    expected[2:5, 4:7] = True
+    np.testing.assert_array_equal(chosen, expected)
+    # on a frame where the starts agree within the noise nothing moves: the threshold is at least 3 sigmas
+    assert not malvar_lenses(np.full((4, 4), 0.1) + np.eye(4) * 2.5, factor=3.0).any()
+
+
+def test_guarded_start_is_admm_from_linear4d_with_malvar_in_the_outlier_lenses(runtime, textured_mosaic):
+    from lfcl.guarded_start import disagreement, malvar_lenses
+
+    b = textured_mosaic.copy()
+    b[9:18, 18:27] = 1.0  # a clipped highlight filling one lens: a sharp lens-to-lens break
+    got = demosaic_lightfield(b, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=6, start="guarded",
+                              skip_flat=False)
+    linear = linear4d(runtime, b, "GRBG", (9, 9), (0, 0), NOISE).astype(np.float64)
+    malvar = malvar_np(b, "GRBG").astype(np.float64)
+    chosen = malvar_lenses(disagreement(linear, malvar, b, (9, 9), NOISE))
+    assert 0 < chosen.sum() < chosen.size  # the break's lenses and ordinary ones
+    x0 = np.where(np.repeat(np.repeat(chosen, 9, 0), 9, 1)[None], malvar, linear)
+    reference_params = dataclasses.replace(
+        AdmmParams(**{k: got.parameters[k] for k in AdmmParams.__dataclass_fields__}), cg_steps=200, cg_tol=1e-12)
+    expected = admm_reference(b.astype(np.float64), "GRBG", (9, 9), "uv", reference_params, x0)
+    assert np.linalg.norm(got.planes - expected.x) / np.linalg.norm(expected.x) <= 1e-4
+    assert got.parameters["start"] == "guarded"
+    assert got.parameters["start_guard"]["lenses_from_malvar"] == chosen.sum()
+    assert got.parameters["start_guard"]["lenses"] == chosen.size
+
+
 def test_default_start_is_malvar(textured_mosaic):
     default = demosaic_lightfield(textured_mosaic, "GRBG", (9, 9), "admm-uv-xc", noise=NOISE, iterations=3)
     malvar = demosaic_lightfield(textured_mosaic, "GRBG", (9, 9), "admm-uv-xc", noise=NOISE, iterations=3,
@@ -83,7 +133,7 @@ def test_process_start_option_reaches_the_solver_and_the_summary(tmp_path):
                                       "--seed", "2", "-o", str(capture)])
     assert result.exit_code == 0, result.output
     summaries = {}
-    for start in ("malvar", "linear4d", "lens-malvar"):
+    for start in ("malvar", "linear4d", "lens-malvar", "guarded"):
         out = tmp_path / start
         result = CliRunner().invoke(cli, ["process", str(capture / "raw.dng"), "--pitch", "9", "--method", "admm-uv",
                                           "--start", start, "--outputs", "center", "--no-previews", "-o", str(out),
@@ -93,6 +143,7 @@ def test_process_start_option_reaches_the_solver_and_the_summary(tmp_path):
     assert summaries["linear4d"]["parameters"]["start"] == "linear4d"
     assert summaries["malvar"]["parameters"]["start"] == "malvar"
     assert summaries["lens-malvar"]["parameters"]["start"] == "lens-malvar"
+    assert summaries["guarded"]["parameters"]["start_guard"]["lenses"] == 64
     result = CliRunner().invoke(cli, ["process", str(capture / "raw.dng"), "--start", "nearest", "-o",
                                       str(tmp_path / "bad")])
     assert result.exit_code != 0 and "nearest" in result.output and not (tmp_path / "bad").exists()

@@ -44,7 +44,8 @@ from ..noise import from_noise_profile
 
 DEFAULT_CANDIDATES = ("malvar,linear4d,admm-uv@1,admm-uv@1:linear4d,admm-uvst@1,admm-uv-xc@1,admm-uv-xc@2,"
                       "admm-uv-xc@1:linear4d,admm-uv-xc@2:linear4d,admm-uvst-xc@1,"
-                      "admm-uvst@1:linear4d,admm-uvst-xc@1:linear4d,admm-uv@1:lens-malvar,admm-uv-xc@1:lens-malvar")
+                      "admm-uvst@1:linear4d,admm-uvst-xc@1:linear4d,admm-uv@1:lens-malvar,admm-uv-xc@1:lens-malvar,"
+                      "admm-uv-xc@1:guarded")
 #: Band edges in log10(sigma): four bands per decade.
 BANDS_PER_DECADE = 4
 #: The PSNRs each rule's losses are judged on (lfcl.auto.VIEWS).

@@ -68,9 +68,10 @@ _OPTIONS = (
                       "default: the method's own stopping rule. With --iterations: at most that many."),
     click.option("--start", default=None, type=click.Choice(STARTS),
                  help="First estimate of the ADMM methods: malvar (the paper's), linear4d (the learned 4D "
-                      "filter; gains on textured and multi-plane scenes) or lens-malvar (Malvar bounded to each "
-                      "lens; gains on the mean image), docs/auto.md. Default: malvar; with --method auto, the "
-                      "start its rule names."),
+                      "filter; gains on textured and multi-plane scenes), lens-malvar (Malvar bounded to each "
+                      "lens; gains on the mean image) or guarded (linear4d, with Malvar in the lenses where it "
+                      "breaks: high-contrast edges, clipped highlights), docs/auto.md. Default: malvar; with "
+                      "--method auto, the start its rule names."),
     click.option("--skip-flat/--solve-flat", "skip_flat", default=None,
                  help="Flat lenses (constant per colour within the noise: a chi-square test against the raw's "
                       "noise model) get their colour means and leave the ADMM solve (admm-uv, admm-uv-xc, auto's "

@@ -65,15 +65,18 @@ def read_linear(path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"cannot read image {path}: no such file")
-    if path.suffix.lower() not in IMAGE_SUFFIXES:  # a camera raw: OpenImageIO may read only its thumbnail
-        try:
-            return _finite_rgb(_develop_raw(path, "not an image file"), path)
-        except ValueError:
-            pass  # not a raw after all: OpenImageIO may still know the format
+    tried_raw = path.suffix.lower() not in IMAGE_SUFFIXES
+    if tried_raw:  # a camera raw: OpenImageIO may read only its thumbnail
+        developed = _develop_raw(path)
+        if developed is not None:
+            return _finite_rgb(developed, path)
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
         reason = oiio.geterror().strip() or "unknown format"
-        return _finite_rgb(_develop_raw(path, reason), path)
+        developed = None if tried_raw else _develop_raw(path)
+        if developed is None:
+            raise ValueError(f"cannot read image {path}: {reason} (nor is it a camera raw LibRaw reads)")
+        return _finite_rgb(developed, path)
     try:
         spec = inp.spec()
         base = spec.format.basetype
@@ -101,18 +104,24 @@ def _finite_rgb(pixels: np.ndarray, path) -> np.ndarray:
     return np.ascontiguousarray(np.clip(pixels, 0.0, None), dtype=np.float32)
 
 
-def _develop_raw(path: Path, reason: str) -> np.ndarray:
+def _develop_raw(path: Path) -> np.ndarray | None:
     """A camera raw developed by LibRaw to linear sRGB in [0, 1] (camera white balance, no
-    brightening, 16 bits); ``ValueError`` naming OpenImageIO's ``reason`` if LibRaw cannot read it either."""
+    brightening, 16 bits); None if LibRaw does not read the file, ``ValueError`` if its header
+    declares more than lfcl.raw.MAX_PIXELS pixels."""
     import rawpy
+
+    from ..raw import MAX_PIXELS
 
     try:
         with rawpy.imread(str(path)) as raw:
+            declared = int(raw.sizes.raw_height) * int(raw.sizes.raw_width)
+            if declared > MAX_PIXELS:  # a hostile header must not make LibRaw allocate it
+                raise ValueError(f"cannot read image {path}: it declares {declared} pixels, more than the limit "
+                                 f"of {MAX_PIXELS}")
             developed = raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16, use_camera_wb=True,
                                         output_color=rawpy.ColorSpace.sRGB)
-    except (rawpy.LibRawError, OSError, RuntimeError) as exc:
-        raise ValueError(f"cannot read image {path}: {reason} (nor is it a camera raw LibRaw reads: "
-                         f"{type(exc).__name__})") from None
+    except (rawpy.LibRawError, OSError, RuntimeError):
+        return None
     return _to_rgb(np.asarray(developed, dtype=np.float32) / 65535.0, path)
 
 
