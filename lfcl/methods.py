@@ -324,11 +324,11 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
         x0 = linear4d_operator(runtime, mosaic, pattern, pitch, origin, noise).forward(b)
         if start == "guarded":  # Malvar in the lenses where linear4d breaks (lfcl/guarded_start.py)
-            from .guarded_start import guarded_planes
+            from .guarded_start import guarded_start
 
             malvar = Malvar(runtime, mosaic.shape, pattern, origin).forward(b)
-            planes, guard = guarded_planes(x0.get(), malvar.get(), mosaic, pitch, noise)
-            x0 = runtime.to_device(planes)
+            x0, guard = guarded_start(runtime, x0, malvar, b, pitch, noise)
+            del malvar
     else:  # lens-malvar: Malvar bounded to each lens, so that no filter reads a neighbouring micro-image
         x0 = Malvar(runtime, mosaic.shape, pattern, origin, lens=pitch if start == "lens-malvar" else None).forward(b)
     if method == "malvar":

@@ -65,20 +65,6 @@ def test_lens_malvar_start_is_admm_from_the_lens_bounded_malvar_planes(textured_
     assert np.linalg.norm(from_malvar.x - expected.x) > 10 * np.linalg.norm(got.planes - expected.x)
 
 
-def test_guarded_disagreement_is_the_rms_difference_in_noise_sigmas():
-    from lfcl.guarded_start import disagreement
-
-    mosaic = np.full((18, 27), 0.25, np.float32)  # 2x3 lenses of 9x9
-    noise = NoiseEstimate(gain=0.0016, floor=0.0001**2, sigma=0.02, source="test")
-    linear, malvar = np.zeros((3, 18, 27), np.float32), np.zeros((3, 18, 27), np.float32)
-    linear[1, 9:18, 0:9] = 0.06  # lens (1, 0): one colour of three differs by 0.06 everywhere
-    d = disagreement(linear, malvar, mosaic, (9, 9), noise)
-    sigma = np.sqrt(0.0016 * 0.25 + 0.0001**2)
-    expected = np.zeros((2, 3))
-    expected[1, 0] = np.sqrt(0.06**2 / 3) / sigma
-    np.testing.assert_allclose(d, expected, rtol=1e-5)
-
-
 def test_guarded_lenses_are_the_frames_outliers_and_their_neighbours():
     from lfcl.guarded_start import malvar_lenses
 
@@ -94,7 +80,8 @@ def test_guarded_lenses_are_the_frames_outliers_and_their_neighbours():
 
 
 def test_guarded_start_is_admm_from_linear4d_with_malvar_in_the_outlier_lenses(runtime, textured_mosaic):
-    from lfcl.guarded_start import disagreement, malvar_lenses
+    from lfcl.guarded_start import malvar_lenses
+    from lfcl.ops.lensguard import lens_disagreement_np
 
     b = textured_mosaic.copy()
     b[9:18, 18:27] = 1.0  # a clipped highlight filling one lens: a sharp lens-to-lens break
@@ -102,7 +89,7 @@ def test_guarded_start_is_admm_from_linear4d_with_malvar_in_the_outlier_lenses(r
                               skip_flat=False)
     linear = linear4d(runtime, b, "GRBG", (9, 9), (0, 0), NOISE).astype(np.float64)
     malvar = malvar_np(b, "GRBG").astype(np.float64)
-    chosen = malvar_lenses(disagreement(linear, malvar, b, (9, 9), NOISE))
+    chosen = malvar_lenses(lens_disagreement_np(linear, malvar, b, (9, 9), gain=NOISE.gain, floor=NOISE.floor))
     assert 0 < chosen.sum() < chosen.size  # the break's lenses and ordinary ones
     x0 = np.where(np.repeat(np.repeat(chosen, 9, 0), 9, 1)[None], malvar, linear)
     reference_params = dataclasses.replace(

@@ -1,0 +1,60 @@
+"""The guarded start's device half (kernels/lensguard.cl) against its float64 references."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lfcl.ops.lensguard import LensGuard, lens_disagreement_np, take_lenses_np
+
+
+def test_disagreement_is_the_rms_difference_in_noise_sigmas():
+    mosaic = np.full((18, 27), 0.25)  # 2x3 lenses of 9x9
+    a, b = np.zeros((3, 18, 27)), np.zeros((3, 18, 27))
+    a[1, 9:18, 0:9] = 0.06  # lens (1, 0): one colour of three differs by 0.06 everywhere
+    d = lens_disagreement_np(a, b, mosaic, (9, 9), gain=0.0016, floor=0.0001**2)
+    expected = np.zeros((2, 3))
+    expected[1, 0] = np.sqrt(0.06**2 / 3) / np.sqrt(0.0016 * 0.25 + 0.0001**2)
+    np.testing.assert_allclose(d, expected, rtol=1e-12)
+
+
+@pytest.mark.parametrize("pitch, lenses", [((9, 9), (5, 7)), ((5, 7), (3, 4)), ((1, 1), (4, 6))])
+def test_device_disagreement_matches_the_reference(runtime, rng, pitch, lenses):
+    H, W = lenses[0] * pitch[0], lenses[1] * pitch[1]
+    mosaic = rng.random((H, W)).astype(np.float32) - 0.05  # some negative levels: clipped to 0
+    a = rng.random((3, H, W)).astype(np.float32)
+    b = (a + 0.02 * rng.standard_normal((3, H, W))).astype(np.float32)
+    guard = LensGuard(runtime, (H, W), pitch)
+    got = guard.disagreement(runtime.to_device(a), runtime.to_device(b), runtime.to_device(mosaic), 2e-3, 1e-6)
+    expected = lens_disagreement_np(a, b, mosaic, pitch, gain=2e-3, floor=1e-6)
+    np.testing.assert_allclose(got, expected, rtol=2e-5)
+
+
+def test_device_disagreement_of_a_noise_free_dark_frame_stays_finite(runtime):
+    zeros = np.zeros((3, 9, 18), np.float32)
+    ones = np.ones((3, 9, 18), np.float32)
+    guard = LensGuard(runtime, (9, 18), (9, 9))
+    d = guard.disagreement(runtime.to_device(ones), runtime.to_device(zeros), runtime.to_device(zeros[0]), 0.0, 0.0)
+    assert np.all(np.isfinite(d)) and np.all(d > 1e10)  # no noise at all: any difference is far beyond it
+
+
+def test_device_take_copies_the_chosen_lenses_only(runtime, rng):
+    pitch, (S, T) = (9, 9), (4, 5)
+    x = rng.random((3, S * 9, T * 9)).astype(np.float32)
+    source = rng.random((3, S * 9, T * 9)).astype(np.float32)
+    chosen = rng.random((S, T)) < 0.4
+    guard = LensGuard(runtime, (S * 9, T * 9), pitch)
+    got = guard.take(runtime.to_device(x), runtime.to_device(source), chosen).get()
+    np.testing.assert_array_equal(got, take_lenses_np(x, source, chosen, pitch))
+    assert 0 < chosen.sum() < chosen.size
+
+
+def test_device_guard_refuses_wrong_shapes(runtime):
+    guard = LensGuard(runtime, (9, 18), (9, 9))
+    planes = runtime.to_device(np.zeros((3, 9, 18), np.float32))
+    with pytest.raises(ValueError, match="chosen must be a 1x2 lens mask"):
+        guard.take(planes, planes, np.ones((2, 1), bool))
+    with pytest.raises(ValueError, match="mosaic must be float32 of shape"):
+        guard.disagreement(planes, planes, runtime.to_device(np.zeros((9, 9), np.float32)), 0.0, 0.0)
+    with pytest.raises(ValueError, match="not a whole number"):
+        LensGuard(runtime, (10, 18), (9, 9))
