@@ -11,6 +11,15 @@ from __future__ import annotations
 import numpy as np
 
 
+def lens_grid(sensor_shape, pitch) -> tuple[int, int, tuple[int, int], tuple[int, int]]:
+    """(height, width, pitch, lenses (S, T)) of a sensor of whole lenses; ``ValueError`` otherwise."""
+    height, width = (int(n) for n in sensor_shape)
+    U, V = (int(p) for p in pitch)
+    if height % U or width % V:
+        raise ValueError(f"mosaic {height}x{width} is not a whole number of {U}x{V} lenses")
+    return height, width, (U, V), (height // U, width // V)
+
+
 def check_device_array(array, shape, name: str):
     """``ValueError`` unless ``array`` is a float32 device array of ``shape``."""
     if tuple(array.shape) != tuple(shape) or array.dtype != np.float32:

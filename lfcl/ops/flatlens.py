@@ -29,7 +29,7 @@ import numpy as np
 
 from ..device import grid_defines
 from ..layout import channel_map, packed_pattern
-from . import check_device_array
+from . import check_device_array, lens_grid
 
 # var(x) is never below this: a noise model without read noise, a zero mean
 VARIANCE_FLOOR = 1e-12
@@ -94,12 +94,7 @@ class LensFlatness:
 
     def __init__(self, runtime, sensor_shape, pattern: str, pitch, origin=(0, 0)):
         self.runtime = runtime
-        self.height, self.width = (int(n) for n in sensor_shape)
-        self.pitch = tuple(int(p) for p in pitch)
-        U, V = self.pitch
-        if self.height % U or self.width % V:
-            raise ValueError(f"mosaic {self.height}x{self.width} is not a whole number of {U}x{V} lenses")
-        self.lenses = (self.height // U, self.width // V)
+        self.height, self.width, self.pitch, self.lenses = lens_grid(sensor_shape, pitch)
         self.pattern = packed_pattern(pattern, origin)
         self._weights = None  # (weights key, device U*V weights): uploaded once per distinct weights
         self._out = runtime.empty((*self.lenses, 4))

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..device import grid_defines
-from . import check_device_array
+from . import check_device_array, lens_grid
 
 #: var is never below this (float32's smallest normal): a noise model without read noise, zero level
 VARIANCE_FLOOR = float(np.finfo(np.float32).tiny)
@@ -55,12 +55,7 @@ class LensGuard:
 
     def __init__(self, runtime, sensor_shape, pitch):
         self.runtime = runtime
-        self.height, self.width = (int(n) for n in sensor_shape)
-        self.pitch = tuple(int(p) for p in pitch)
-        U, V = self.pitch
-        if self.height % U or self.width % V:
-            raise ValueError(f"mosaic {self.height}x{self.width} is not a whole number of {U}x{V} lenses")
-        self.lenses = (self.height // U, self.width // V)
+        self.height, self.width, self.pitch, self.lenses = lens_grid(sensor_shape, pitch)
         self._out = runtime.empty(self.lenses)
 
     def disagreement(self, a, b, mosaic, gain: float, floor: float) -> np.ndarray:
