@@ -13,7 +13,7 @@ from lfcl.cli import cli
 
 KERNELS = [
     "copy (reference)", "CFA A", "CFA A^T", "CFA A^T A", "Malvar", "Malvar, lens-bounded", "Malvar vs colour-demosaicing",
-    "linear4d",
+    "linear4d", "lens disagreement", "lens swap (half the lenses)",
     "D uv", "D^T uv", "D^T D uv", "normal_apply uv", "jacobi_apply uv", "build_rhs uv", "lens_solve uv",
     "D uvst", "D^T uvst", "D^T D uvst", "normal_apply uvst", "jacobi_apply uvst", "build_rhs uvst",
     "dot", "norm2", "diff_norm2", "abs_sum", "soft_threshold", "zu_update", "axpby",
@@ -48,6 +48,7 @@ def test_bench_kernels_json():
     assert by_name["D uvst"]["bytes"] == 4 * 5 * P
     assert by_name["zu_update"]["bytes"] == 4 * 6 * P
     assert by_name["norm2"]["bytes"] == 4 * P
+    assert by_name["lens disagreement"]["bytes"] == 4 * (2 * P + N)
 
 
 def test_bench_kernels_table_and_errors():

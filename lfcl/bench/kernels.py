@@ -161,6 +161,25 @@ def linear4d_cases(runtime, sensor, pitch) -> list[Case]:
                  lambda h: linear4d_np(h["b"], PATTERN, pitch, model.taps, coefficients))]
 
 
+def lens_guard_cases(runtime, sensor, pitch) -> list[Case]:
+    """The guarded start's two kernels: the per-lens disagreement of two starts, and the swap of a
+    checkerboard of lenses (half of them) from one start into the other."""
+    from ..ops.lensguard import LensGuard, lens_disagreement_np, take_lenses_np
+
+    guard = LensGuard(runtime, sensor, pitch)
+    S, T = guard.lenses
+    checkerboard = (np.add.outer(np.arange(S), np.arange(T)) % 2).astype(bool)
+    N, P = sensor[0] * sensor[1], 3 * sensor[0] * sensor[1]
+    return [
+        Case("lens disagreement", "lensguard.cl:lens_disagreement", "read 2P + N", 2 * P + N, ("x", "x2", "b"),
+             lambda d: guard.disagreement(d["x"], d["x2"], d["b"], 1e-3, 1e-6),
+             lambda h: lens_disagreement_np(h["x"], h["x2"], h["b"], pitch, gain=1e-3, floor=1e-6)),
+        Case("lens swap (half the lenses)", "lensguard.cl:take_lenses", "read P/2 + write P/2", P,
+             ("x", "x2", "y"), lambda d: guard.take(d["y"], d["x"], checkerboard),
+             lambda h: take_lenses_np(h["x2"], h["x"], checkerboard, pitch)),
+    ]
+
+
 def build_cases(runtime, height: int, width: int, pitch) -> list[Case]:
     """The benchmarked kernels, in run order (big gradient buffers last but one group)."""
     N, P = height * width, 3 * height * width
@@ -198,6 +217,8 @@ def build_cases(runtime, height: int, width: int, pitch) -> list[Case]:
                           lambda d: malvar.forward(d["b"], out=d["y"]),
                           lambda h: demosaicing_CFA_Bayer_Malvar2004(h["b"], PATTERN)))
     cases += linear4d_cases(runtime, sensor, pitch)
+    if height % U == 0 and width % V == 0:
+        cases += lens_guard_cases(runtime, sensor, pitch)
 
     def admm_cases(dims):
         from ..solvers.admm import AdmmSolver, lens_block_inverses
