@@ -167,7 +167,7 @@ def replacement(choice: AutoChoice, why: str, method: str | None = None, strengt
 
 def for_pitch(choice: AutoChoice, pitch) -> tuple[AutoChoice, dict | None]:
     """``choice`` and None if it runs on lenses of ``pitch``, else :func:`replacement`'s pair:
-    linear4d (as the method or the start) has coefficients for one pitch only."""
+    linear4d (as the method or the start, the guarded start included) has coefficients for one pitch only."""
     if "linear4d" not in (choice.method, choice.start) and choice.start != "guarded":
         return choice, None
     from .ops.linear4d import load_model
