@@ -10,6 +10,7 @@ import pytest
 import rawpy
 import tifffile
 from click.testing import CliRunner
+from conftest import shared_path
 
 from lfcl.layout import PATTERNS, channel_map, pattern_from_rawpy, tiled_views
 from lfcl.sim import (
@@ -251,9 +252,7 @@ def test_a_file_neither_reads_says_both_failed(tmp_path):
 
 
 def test_a_tiff_based_raw_is_developed_not_read_as_its_thumbnail():
-    kdc = ANTINOUS.parents[1] / "digicam_corpus" / "Kodak_DC120_P003908_uncompressed.KDC"
-    if not kdc.is_file():
-        pytest.skip(f"{kdc} is not present (../shared/realdata)")
+    kdc = shared_path("realdata", "digicam_corpus", "Kodak_DC120_P003908_uncompressed.KDC")
     assert read_linear(kdc).shape == (976, 1301, 3)  # OpenImageIO alone opens its 80-pixel-wide thumbnail
 
 
