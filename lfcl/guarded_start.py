@@ -22,7 +22,7 @@ from .noise import NoiseEstimate
 from .ops.lensguard import LensGuard
 
 #: How many times the frame's median disagreement a lens's must exceed to take the Malvar start.
-GUARD_FACTOR = 3.0
+GUARD_FACTOR = 2.5
 
 
 def malvar_lenses(d: np.ndarray, factor: float = GUARD_FACTOR) -> np.ndarray:

@@ -87,6 +87,29 @@ def test_fit_rule_takes_the_cheapest_candidate_close_enough_to_the_best():
     assert band_of(0.002) != band_of(0.02)
 
 
+def test_band_ceiling_counts_the_best_single_candidate_of_each_band_and_class():
+    from lfcl.bench.auto_rule import band_ceiling
+
+    # one band, two kinds of content: each method wins one kind by 1 dB, so one pick reaches 2 of 3
+    rows = [_row(0.002, {"admm-uv@1": (40.0, 45.0, 0.1), "admm-uv-xc@1": (39.0, 45.0, 0.1)}),
+            _row(0.0021, {"admm-uv@1": (41.0, 45.0, 0.1), "admm-uv-xc@1": (40.15, 45.0, 0.1)}),
+            _row(0.0022, {"admm-uv@1": (39.0, 45.0, 0.1), "admm-uv-xc@1": (40.0, 45.0, 0.1)})]
+    ceiling = band_ceiling(rows, "center")
+    assert (ceiling["within"], ceiling["captures"]) == (2, 3)
+    assert [b["candidate"] for b in ceiling["bands"]] == ["admm-uv@1"]
+    assert ceiling["bands"][0]["worst_loss_db"] == pytest.approx(1.0)
+    # the same content split into classes by the cross-lens ratio: each class may take its own pick
+    rows[2]["lens_ratio"] = 1.5
+    split = band_ceiling(rows, "center")
+    assert split["within"] == 3
+    assert [(b["content"], b["candidate"]) for b in split["bands"]] == [("default", "admm-uv@1"),
+                                                                        ("low-ratio", "admm-uv-xc@1")]
+    # no rule that picks one candidate per band does better on these captures: the fitted one neither
+    fitted = held_out_losses([dict(r, scene="s", seed=0, lux=1) for r in rows], fit_rule(rows, 0.1, "center"),
+                             "center")
+    assert sum(r["loss_db"] <= 0.2 for r in fitted) <= ceiling["within"]
+
+
 def test_auto_check_names_the_pick_the_best_fixed_method_per_view_and_the_loss():
     from lfcl.bench.auto_check import check_rows, format_check
 
@@ -302,7 +325,10 @@ def test_auto_rule_refit_fits_the_scored_rows_again(tmp_path, capsys):
     assert [b["candidate"] for b in refit["rule"]] == ["admm-uv@1"]  # two tie at 2 dB and 0.1 s: the first
     assert [b["candidate"] for b in refit["rules_by_view"]["mean"]] == ["admm-uvst@1"]
     assert refit["held_out_losses_by_view"]["center"][0]["loss_db"] == 0.0
-    assert "held out (mean): charts seed 0 12 lux: admm-uvst@1 loses 0.00 dB" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "held out (mean): charts seed 0 12 lux: admm-uvst@1 loses 0.00 dB" in printed
+    assert refit["held_out_ceiling"]["both"]["within"] == 0  # each method loses 2 dB in one view
+    assert "held out (mean): the rule within 0.2 dB at 1 of 1 captures" in printed
 
 
 def test_auto_rule_refit_adds_and_drops_scored_rows(tmp_path):
