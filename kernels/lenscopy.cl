@@ -27,3 +27,21 @@ __kernel void copy_lenses(__global const float *src, const int src_lenses, const
         for (int v = 0; v < PITCH_V; ++v)
             out[(size_t)u * dst_width + v] = in[(size_t)u * src_width + v];
 }
+
+// Set whole lenses to constants: lens lenses[k] (index s * T + t of a grid of `lens_count` lenses
+// per lens row) of plane p becomes values[k * planes + p] at every pixel (the flat lenses' colour
+// means, lfcl/flat_lenses.py). Global size (count, planes); one work-item fills one lens of one plane.
+__kernel void fill_lenses(__global float *dst, const int lens_count, const int lens_rows,
+                          __global const int *lenses, __global const float *values, const int count)
+{
+    const int k = get_global_id(0), p = get_global_id(1), planes = get_global_size(1);
+    if (k >= count) return;
+    const int lens = lenses[k];
+    const size_t width = (size_t)lens_count * PITCH_V;
+    __global float *out = dst + (size_t)p * lens_rows * PITCH_U * width
+                        + (size_t)(lens / lens_count) * PITCH_U * width + (size_t)(lens % lens_count) * PITCH_V;
+    const float value = values[(size_t)k * planes + p];
+    for (int u = 0; u < PITCH_U; ++u)
+        for (int v = 0; v < PITCH_V; ++v)
+            out[(size_t)u * width + v] = value;
+}

@@ -38,6 +38,7 @@ import scipy.special
 from .method_names import FLAT_P, SKIPPABLE  # noqa: F401  (SKIPPABLE: re-exported for lfcl.methods)
 from .noise import NoiseEstimate
 from .ops.flatlens import colour_counts, lens_flatness_np
+from .ops.lenscopy import fill_lenses_np
 
 #: The packed grid's lens rows are whole sixteenths of the sensor's (module docstring).
 LADDER_STEPS = 16
@@ -51,6 +52,11 @@ class FlatLenses:
     means: np.ndarray  # [S, T, 3] float64: the weighted mean of each colour's lit samples
     p_value: np.ndarray  # [S, T]
     threshold: float
+
+    def flat_means(self) -> tuple[np.ndarray, np.ndarray]:
+        """The flat lenses' indices s * T + t and their colour means [n, 3]."""
+        lenses = np.flatnonzero(self.flat)
+        return lenses, self.means.reshape(-1, self.means.shape[-1])[lenses]
 
     @property
     def share(self) -> float:
@@ -97,12 +103,8 @@ def flat_lenses(mosaic: np.ndarray, pattern: str, pitch, noise: NoiseEstimate, *
 
 def fill_flat(planes: np.ndarray, found: FlatLenses, pitch) -> np.ndarray:
     """Set every flat lens of ``planes`` [3, S*U, T*V] (in place) to its colour means; returns planes."""
-    U, V = pitch
-    C, H, W = planes.shape
-    lenses = planes.reshape(C, H // U, U, W // V, V)
-    s, t = np.nonzero(found.flat)
-    lenses[:, s, :, t, :] = found.means[s, t][:, :, None, None].astype(planes.dtype)  # [n, C, U, V]
-    return planes
+    lenses, means = found.flat_means()
+    return fill_lenses_np(planes, lenses, means, pitch)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -139,6 +141,11 @@ class LensPacking:
         s2, t2 = np.divmod(self.target, self.grid[1])
         out[:, s2, :, t2, :] = full[:, s, :, t, :]
         return out.reshape(*lead, self.grid[0] * U, self.grid[1] * V)
+
+    def unpack_pairs(self) -> np.ndarray:
+        """(packed lens, full-grid lens) for every solved lens: the table of lfcl/ops/lenscopy.py that
+        puts the packed lenses back on the device, as :meth:`unpack` does on the host."""
+        return np.stack([self.target, self.source], axis=1)
 
     def unpack(self, packed: np.ndarray, into: np.ndarray, pitch) -> np.ndarray:
         """Write the packed lenses back to their places in ``into`` [..., S*U, T*V] (in place)."""

@@ -392,11 +392,18 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         freeze_reports.append(report)
         return result
 
+    planes_packed = packing is not None  # planes on the host that hold the packed lenses only
     if real is not None and not real.any():  # every lens is flat: nothing to solve
         planes, runs, band_rows = np.zeros((3, H, W), np.float32), [], []
     elif fits and region_rows is None:
         result = solve(AdmmSolver(runtime, (H, W), pattern, pitch, dims, origin), b, x0, samples_in(slice(0, H)))
-        planes, runs, band_rows = result.x.get(), [dataclasses.replace(result, x=None)], [H]
+        x, runs, band_rows = result.x, [dataclasses.replace(result, x=None)], [H]
+        if packing is not None:  # the solved lenses back to their places and the flat ones' means, on the device
+            del b, x0, result  # the solver's buffers go; x and the full planes fit where the full start was
+            x = copy(x, runtime.empty(full_shape), copy.upload(packing.unpack_pairs()))
+            copy.fill(x, *found.flat_means())
+            planes_packed = False
+        planes = x.get()
     elif dims == "uv":
         per_row = (solver_bytes((U, W), dims, exact=True, cross_channel=params.cross_channel),
                    solver_largest_buffer((U, W), dims))
@@ -431,7 +438,7 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
             f"(max allocation {runtime.device.max_mem_alloc_size / 2**30:.1f} GiB); its prior couples "
             "neighbouring lenses, so it does not run in bands: use admm-uv, a crop, or a larger device"
         )
-    if packing is not None:  # the solved lenses back to their places, the flat ones to their means
+    if planes_packed:  # the solved lenses back to their places, the flat ones to their means
         planes = fill_flat(packing.unpack(planes, np.empty(full_shape, np.float32), pitch), found, pitch)
     if not np.all(np.isfinite(planes)):
         raise FloatingPointError(f"{method} produced NaN/Inf values; try a smaller lambda or rho")

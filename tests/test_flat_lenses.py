@@ -84,6 +84,20 @@ def test_packing_keeps_bayer_phase_and_round_trips(shape):
 # --- the test for flatness --------------------------------------------------------------
 
 
+def test_packed_lenses_go_back_on_the_device_as_on_the_host(runtime, rng):
+    from lfcl.ops.lenscopy import LensCopy
+
+    active = rng.random((6, 5)) < 0.4
+    packing = pack_lenses(active)
+    assert packing.grid[0] < 6
+    packed = rng.random((3, packing.grid[0] * 9, 5 * 9)).astype(np.float32)
+    on_host = packing.unpack(packed, np.zeros((3, 54, 45), np.float32), (9, 9))
+    copy = LensCopy(runtime, (9, 9))
+    on_device = copy(runtime.to_device(packed), runtime.to_device(np.zeros((3, 54, 45), np.float32)),
+                     packing.unpack_pairs())
+    np.testing.assert_array_equal(on_device.get(), on_host)
+
+
 def test_flat_lenses_are_found_at_the_stated_false_alarm_rate():
     mosaic, edged = lens_mosaic((40, 40), edge_every=2, contrast=0.05)
     found = flat_lenses(mosaic, "GRBG", (9, 9), NOISE, threshold=0.01)

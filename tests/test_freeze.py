@@ -11,7 +11,7 @@ import pytest
 from lfcl.ops.cfa import cfa_sample_np
 from lfcl.ops.crosschannel import cross_gradient_np
 from lfcl.ops.gradient import gradient_np
-from lfcl.ops.lenscopy import LensCopy, copy_lenses_np
+from lfcl.ops.lenscopy import LensCopy, copy_lenses_np, fill_lenses_np
 from lfcl.ops.lensfill import lens_fill_np
 from lfcl.ops.malvar import malvar_np
 from lfcl.solvers.admm import AdmmSolver
@@ -100,6 +100,32 @@ def test_copy_lenses_matches_numpy(runtime, rng, planes):
     assert not untouched.any()
     np.testing.assert_array_equal(expected.reshape(-1, 2 * U, 8 * V)[:, U:2 * U, V:2 * V],
                                   dst.reshape(-1, 2 * U, 8 * V)[:, U:2 * U, V:2 * V])
+
+
+@pytest.mark.parametrize("planes", [(3,), ()])
+def test_fill_lenses_matches_numpy(runtime, rng, planes):
+    U, V = 3, 5  # odd and non-square lenses
+    dst = rng.random((*planes, 4 * U, 6 * V)).astype(np.float32)
+    lenses = [0, 23, 7, 12]
+    values = rng.random((len(lenses), planes[0] if planes else 1)).astype(np.float32)
+    device = runtime.to_device(dst)
+    LensCopy(runtime, (U, V)).fill(device, lenses, values)
+    expected = fill_lenses_np(dst.copy(), lenses, values, (U, V))
+    np.testing.assert_array_equal(device.get(), expected)
+    # the twin against the definition: lens 7 = (1, 1) holds its values, lens 8 = (1, 2) is untouched
+    grid = expected.reshape(-1, 4 * U, 6 * V)
+    np.testing.assert_array_equal(grid[:, U:2 * U, V:2 * V], np.broadcast_to(values[2][:, None, None], (len(values[2]), U, V)))
+    np.testing.assert_array_equal(grid[:, U:2 * U, 2 * V:3 * V], dst.reshape(-1, 4 * U, 6 * V)[:, U:2 * U, 2 * V:3 * V])
+
+
+def test_fill_lenses_rejects_bad_lenses_and_values(runtime):
+    device = runtime.to_device(np.zeros((3, 4, 4), np.float32))
+    with pytest.raises(ValueError, match="outside the 2x2 lenses"):
+        LensCopy(runtime, (2, 2)).fill(device, [4], np.zeros((1, 3)))
+    with pytest.raises(ValueError, match="values hold 2 planes"):
+        LensCopy(runtime, (2, 2)).fill(device, [0], np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="outside the 2x2 lenses"):
+        fill_lenses_np(np.zeros((3, 4, 4), np.float32), [-1], np.zeros((1, 3)), (2, 2))
 
 
 def test_copy_lenses_rejects_bad_pairs(runtime):

@@ -5,7 +5,9 @@ colour planes, the gradient blocks ``[k, C, H, W]`` or a mosaic ``[H, W]``. A pa
 ``(i, j)`` copies lens ``i = s * T + t`` of the source to lens ``j`` of the destination,
 in every plane; a pair ``(-1, j)`` sets lens ``j`` to zero; lenses no pair names keep their
 values. lfcl/solvers/freeze.py uses it
-to move the lenses still being solved into a smaller solver and back.
+to move the lenses still being solved into a smaller solver and back, lfcl/methods.py to pack the
+lenses that are not flat into a smaller solver and to put them back (lfcl/flat_lenses.py), where
+``fill_lenses`` gives the flat ones their colour means.
 
 Example::
 
@@ -59,8 +61,23 @@ def copy_lenses_np(src: np.ndarray, dst: np.ndarray, pairs, pitch) -> np.ndarray
     return out
 
 
+def fill_lenses_np(dst: np.ndarray, lenses, values, pitch) -> np.ndarray:
+    """``dst`` [P, S*U, T*V] (in place) with every pixel of lens ``lenses[k]`` (index s * T + t) of
+    plane p set to ``values[k, p]``; returns dst."""
+    lenses = np.asarray(lenses, np.int64).reshape(-1)
+    values = np.asarray(values, dst.dtype).reshape(len(lenses), -1)
+    grid = _lens_view(dst, pitch)
+    if values.shape[1] != grid.shape[0]:
+        raise ValueError(f"values hold {values.shape[1]} planes, dst {grid.shape[0]}")
+    if lenses.size and not 0 <= lenses.min() <= lenses.max() < grid.shape[1] * grid.shape[3]:
+        raise ValueError(f"a lens index is outside the {grid.shape[1]}x{grid.shape[3]} lenses")
+    s, t = np.divmod(lenses, grid.shape[3])
+    grid[:, s, :, t, :] = values[:, :, None, None]  # [n, P, U, V]
+    return dst
+
+
 class LensCopy:
-    """copy_lenses_np on the device (kernels/lenscopy.cl), for lenses of one pitch."""
+    """copy_lenses_np and fill_lenses_np on the device (kernels/lenscopy.cl), for lenses of one pitch."""
 
     def __init__(self, runtime, pitch):
         self.runtime = runtime
@@ -79,14 +96,8 @@ class LensCopy:
         table = self.upload(pairs) if isinstance(pairs, (list, tuple, np.ndarray)) else pairs
         if table is None:
             return dst
-        grids = []
-        for name, array in (("src", src), ("dst", dst)):
-            H, W = array.shape[-2:]
-            check_device_array(array, array.shape, name)
-            if H % self.U or W % self.V:
-                raise ValueError(f"{name}: planes {H}x{W} are not a whole number of {self.U}x{self.V} lenses")
-            grids.append((array.size // (H * W), H // self.U, W // self.V))
-        (planes, src_rows, src_lenses), (dst_planes, dst_rows, dst_lenses) = grids
+        (planes, src_rows, src_lenses), (dst_planes, dst_rows, dst_lenses) = (self._grid(src, "src"),
+                                                                              self._grid(dst, "dst"))
         if planes != dst_planes:
             raise ValueError(f"src and dst must hold as many planes: {planes} and {dst_planes}")
         count = table.shape[0]
@@ -96,3 +107,29 @@ class LensCopy:
             defines=grid_defines((self.U, self.V), 0),
         )
         return dst
+
+    def fill(self, dst, lenses, values):
+        """Set lens ``lenses[k]`` of every plane p of ``dst`` to ``values[k, p]`` (host arrays). Returns dst."""
+        planes, rows, lens_count = self._grid(dst, "dst")
+        lenses = np.asarray(lenses, np.int32).reshape(-1)
+        values = np.ascontiguousarray(np.asarray(values, np.float32).reshape(len(lenses), -1))
+        if values.shape[1] != planes:
+            raise ValueError(f"values hold {values.shape[1]} planes, dst {planes}")
+        if not lenses.size:
+            return dst
+        if not 0 <= lenses.min() <= lenses.max() < rows * lens_count:
+            raise ValueError(f"a lens index is outside the {rows}x{lens_count} lenses")
+        self.runtime.launch(
+            "lenscopy", "fill_lenses", (lenses.size, planes), dst.data, np.int32(lens_count), np.int32(rows),
+            self.runtime.to_device(lenses).data, self.runtime.to_device(values).data, np.int32(lenses.size),
+            defines=grid_defines((self.U, self.V), 0),
+        )
+        return dst
+
+    def _grid(self, array, name: str) -> tuple[int, int, int]:
+        """(planes, lens rows, lenses per row) of a device array of this pitch's lenses."""
+        H, W = array.shape[-2:]
+        check_device_array(array, array.shape, name)
+        if H % self.U or W % self.V:
+            raise ValueError(f"{name}: planes {H}x{W} are not a whole number of {self.U}x{self.V} lenses")
+        return array.size // (H * W), H // self.U, W // self.V
