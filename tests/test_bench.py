@@ -13,7 +13,8 @@ from lfcl.cli import cli
 
 KERNELS = [
     "copy (reference)", "CFA A", "CFA A^T", "CFA A^T A", "Malvar", "Malvar, lens-bounded", "Malvar vs colour-demosaicing",
-    "linear4d", "lens disagreement", "lens swap (half the lenses)",
+    "linear4d", "lens disagreement", "lens swap (half the lenses)", "lens copy (half the lenses)",
+    "lens fill (half the lenses)",
     "D uv", "D^T uv", "D^T D uv", "normal_apply uv", "jacobi_apply uv", "build_rhs uv", "lens_solve uv",
     "D uvst", "D^T uvst", "D^T D uvst", "normal_apply uvst", "jacobi_apply uvst", "build_rhs uvst",
     "dot", "norm2", "diff_norm2", "abs_sum", "soft_threshold", "zu_update", "axpby",
@@ -49,6 +50,7 @@ def test_bench_kernels_json():
     assert by_name["zu_update"]["bytes"] == 4 * 6 * P
     assert by_name["norm2"]["bytes"] == 4 * P
     assert by_name["lens disagreement"]["bytes"] == 4 * (2 * P + N)
+    assert by_name["lens fill (half the lenses)"]["bytes"] == 4 * P // 2
 
 
 def test_bench_kernels_table_and_errors():

@@ -180,6 +180,27 @@ def lens_guard_cases(runtime, sensor, pitch) -> list[Case]:
     ]
 
 
+def lens_copy_cases(runtime, sensor, pitch) -> list[Case]:
+    """The flat lenses' two kernels (lfcl/methods.py): putting solved lenses back (a checkerboard of
+    half the lenses, each to its own place) and setting lenses to their colour means (the other half)."""
+    from ..ops.lenscopy import LensCopy, copy_lenses_np, fill_lenses_np
+
+    copy = LensCopy(runtime, pitch)
+    S, T = sensor[0] // pitch[0], sensor[1] // pitch[1]
+    board = (np.add.outer(np.arange(S), np.arange(T)) % 2).astype(bool).ravel()
+    solved, flat = np.flatnonzero(board), np.flatnonzero(~board)
+    pairs = np.stack([solved, solved], axis=1)
+    table = copy.upload(pairs)
+    means = np.random.default_rng(0).random((flat.size, 3)).astype(np.float32)
+    P = 3 * sensor[0] * sensor[1]
+    return [
+        Case("lens copy (half the lenses)", "lenscopy.cl:copy_lenses", "read P/2 + write P/2", P, ("x", "x2", "y"),
+             lambda d: copy(d["x"], d["y"], table), lambda h: copy_lenses_np(h["x"], h["x2"], pairs, pitch)),
+        Case("lens fill (half the lenses)", "lenscopy.cl:fill_lenses", "write P/2", P // 2, ("x2", "y"),
+             lambda d: copy.fill(d["y"], flat, means), lambda h: fill_lenses_np(h["x2"], flat, means, pitch)),
+    ]
+
+
 def build_cases(runtime, height: int, width: int, pitch) -> list[Case]:
     """The benchmarked kernels, in run order (big gradient buffers last but one group)."""
     N, P = height * width, 3 * height * width
@@ -219,6 +240,7 @@ def build_cases(runtime, height: int, width: int, pitch) -> list[Case]:
     cases += linear4d_cases(runtime, sensor, pitch)
     if height % U == 0 and width % V == 0:
         cases += lens_guard_cases(runtime, sensor, pitch)
+        cases += lens_copy_cases(runtime, sensor, pitch)
 
     def admm_cases(dims):
         from ..solvers.admm import AdmmSolver, lens_block_inverses
