@@ -42,3 +42,43 @@ __kernel void take_lenses(__global float *x, __global const float *from, __globa
     for (int c = 0; c < 3; ++c)
         x[c * plane + i] = from[c * plane + i];
 }
+
+// guard_lens_means, one work-item per lens, global size (T, S): the safety net's lens-mean guard
+// (lfcl/safety_net.py). For each colour c, dx = mean_uv x_c - mean_uv m_c is soft-thresholded at
+// k sd, sd = sqrt(var(level) / (U V / 4)) (the noise of a mean of a quarter of the lens's samples,
+// var = gain * max(level, 0) + floor): x_c += soft(dx, k sd) - dx over the lens, so that x's lens
+// mean moves to Malvar's where the two agree within k sd and to within k sd of it elsewhere.
+// replaced[s * T + t] = how many colours were moved all the way (|dx| <= k sd), 0..3.
+__kernel void guard_lens_means(__global float *x, __global const float *m, __global const float *mosaic,
+                               __global float *replaced, const int height, const int width,
+                               const float gain, const float noise_floor, const float k)
+{
+    const int t = get_global_id(0), s = get_global_id(1);
+    const int lenses_t = width / PITCH_V;
+    if (t >= lenses_t || s >= height / PITCH_U) return;
+    const size_t plane = (size_t)height * width;
+    const float samples = (float)(PITCH_U * PITCH_V);
+    float level = 0.0f;
+    for (int u = 0; u < PITCH_U; ++u)
+        for (int v = 0; v < PITCH_V; ++v)
+            level += mosaic[(size_t)(s * PITCH_U + u) * width + t * PITCH_V + v];
+    const float variance = fmax(gain * fmax(level / samples, 0.0f) + noise_floor, FLT_MIN);
+    const float limit = k * sqrt(variance / (0.25f * samples));
+    float moved = 0.0f;
+    for (int c = 0; c < 3; ++c) {
+        float dx = 0.0f;
+        for (int u = 0; u < PITCH_U; ++u)
+            for (int v = 0; v < PITCH_V; ++v) {
+                const size_t i = c * plane + (size_t)(s * PITCH_U + u) * width + t * PITCH_V + v;
+                dx += x[i] - m[i];
+            }
+        dx /= samples;
+        const float kept = copysign(fmax(fabs(dx) - limit, 0.0f), dx);
+        moved += fabs(dx) <= limit ? 1.0f : 0.0f;
+        const float shift = kept - dx;
+        for (int u = 0; u < PITCH_U; ++u)
+            for (int v = 0; v < PITCH_V; ++v)
+                x[c * plane + (size_t)(s * PITCH_U + u) * width + t * PITCH_V + v] += shift;
+    }
+    replaced[(size_t)s * lenses_t + t] = moved;
+}

@@ -16,7 +16,11 @@ from __future__ import annotations
 import dataclasses
 import importlib.resources
 import os
+import re
+import sys
+import tempfile
 import threading
+import warnings
 
 import numpy as np
 import pyopencl as cl
@@ -140,7 +144,7 @@ class Runtime:
             if program is None:
                 source = kernel_source(_COMMON_SOURCE) + "\n" + kernel_source(name)
                 options = ["-cl-std=CL1.2", *(f"-D{k}={int(v)}" for k, v in defines)]
-                program = cl.Program(self.context, source).build(options=options)
+                program = build_program(self.context, source, options, f"kernels/{name}.cl")
                 self._programs[key] = program
             return program
 
@@ -171,6 +175,63 @@ class Runtime:
         import pyopencl.array as cla
 
         return cla.to_device(self.queue, np.ascontiguousarray(array))
+
+
+def verbose() -> bool:
+    """Whether ``LFCL_VERBOSE`` is set (``lfcl --verbose`` sets it): then build logs go to stderr."""
+    return os.environ.get("LFCL_VERBOSE", "").strip().lower() not in ("", "0", "false", "no", "off")
+
+
+# What a compiler prints straight to the process's stderr while it builds (PoCL's clang:
+# "2 warnings generated."), next to the build log it hands back.
+_BUILD_CHATTER = re.compile(r"^\d+ (warning|error)s? generated\.$")
+
+
+def build_program(context: cl.Context, source: str, options: list[str], what: str) -> cl.Program:
+    """Build ``source`` quietly: the build log (warnings) only with ``LFCL_VERBOSE`` (docs/outputs.md, Quiet runs).
+
+    Compilers report warnings twice: in the build log, which pyopencl turns into a
+    ``CompilerWarning``, and on the process's stderr (PoCL's clang prints "N warnings
+    generated." to file descriptor 2 directly). Both are caught here. On CPUs without
+    AVX-512, PoCL's clang notes that passing float16/int16 to the helpers of common.cl
+    "changes the ABI" (-Wpsabi; PoCL builds with ``-Dinline=``, so they are ordinary
+    calls to it): nothing a user can act on. Anything else the compiler prints on stderr
+    is passed on; a failed build raises with its log as before.
+    """
+    caught_warnings: list = []
+    printed: list[str] = []
+    sys.stderr.flush()
+    with tempfile.TemporaryFile() as captured:
+        try:
+            saved = os.dup(2)
+        except OSError:  # no stderr to protect
+            saved = None
+        if saved is not None:
+            os.dup2(captured.fileno(), 2)
+        try:
+            with warnings.catch_warnings(record=True) as caught_warnings:
+                warnings.simplefilter("always")
+                program = cl.Program(context, source).build(options=options)
+        finally:
+            if saved is not None:
+                os.dup2(saved, 2)
+                os.close(saved)
+            captured.seek(0)
+            printed = captured.read().decode(errors="replace").splitlines()
+            # what is not the compiler's count line (another thread's output, a driver's message) goes on
+            other = [line for line in printed if line.strip() and not _BUILD_CHATTER.match(line.strip())]
+            if other:
+                print("\n".join(other), file=sys.stderr)
+    for w in caught_warnings:  # warnings other than the compiler's own go on as they were
+        if not issubclass(w.category, cl.CompilerWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    chatter = [line for line in printed if _BUILD_CHATTER.match(line.strip())]
+    if verbose():
+        logs = [str(program.get_build_info(d, cl.program_build_info.LOG)).strip() for d in context.devices]
+        text = "\n".join(log for log in logs if log) or "(empty build log)"
+        print(f"lfcl: built {what} with {' '.join(options)}: {text}"
+              + ("".join(f"\n{line}" for line in chatter)), file=sys.stderr)
+    return program
 
 
 def grid_defines(pitch, dims_mask: int) -> tuple:

@@ -14,7 +14,7 @@ lens keeps its row and column parity, so its Bayer phase, and the packed grid's 
 come from a fixed ladder (sixteenths of the sensor's) so that PoCL, which compiles a kernel
 for every new global size, compiles a handful of sizes per sensor and not one per image.
 
-Measured (docs/auto.md, ``python -m lfcl.bench.flat``): filling flat lenses with their
+Measured (docs/auto.md, ``python research/flat.py``): filling flat lenses with their
 means gains PSNR on both views, and the ADMM work drops by the flat share.
 
 Example::

@@ -9,6 +9,9 @@
 ``admm-uv-xc``, ``admm-uvst-xc``  ADMM with TV plus the cross-channel prior
                ``lam_xc ||D (x_R - x_G)||_1 + lam_xc ||D (x_B - x_G)||_1`` over (u, v),
                resp. (u, v, s, t) (docs/admm.md, "The cross-channel prior").
+``admm-epi``   ADMM with differences along each sample's epipolar line, the disparity estimated from
+               the raw (lfcl.depth), and a (u, v) fall-back where its confidence is low
+               (lfcl/solvers/epi.py; docs/admm.md, "admm-epi").
 
 Every ADMM method starts from the Malvar result. Its defaults follow the noise
 level ``sigma`` (rms noise per raw pixel, normalised units) estimated from the raw
@@ -38,7 +41,6 @@ from .ops.lenscopy import LensCopy
 from .ops.malvar import Malvar
 from .ops.reduce import Reductions
 from .solvers.admm import AdmmSolver, solver_bytes, solver_largest_buffer
-from .solvers.freeze import FreezeSettings, combine_reports, solve_with_freezing
 from .solvers.params import AdmmParams
 
 
@@ -53,21 +55,26 @@ class AdmmDefaults:
     rho: float = 0.3
     cg_steps: int = 4
     xc_per_sigma: float = 0.0  # cross-channel prior weight / sigma; 0: no cross-channel prior
+    fb_per_sigma: float = 0.0  # admm-epi's fall-back weight lam_fb / sigma (dims "epi": lfcl/solvers/epi.py)
 
 
-# From the sweep in docs/admm.md (python -m lfcl.bench.sweep): the rule with the best
+# From the sweep in docs/admm.md (python research/sweep.py): the rule with the best
 # worst-case centre-view gain over Malvar across charts/deadleaves at 1-50 lux, among
 # rules that never lose more than 0.3 dB on the mean image.
 ADMM_DEFAULTS = {
     "admm-uv": AdmmDefaults(dims="uv", lam_per_sigma=0.1, change_per_sigma=0.1, max_iter=60),
     "admm-st": AdmmDefaults(dims="st", lam_per_sigma=0.01, change_per_sigma=0.0, max_iter=5),
     "admm-uvst": AdmmDefaults(dims="uvst", lam_per_sigma=0.01, change_per_sigma=0.0, max_iter=10),
-    # From python -m lfcl.bench.sweep_xc (docs/admm.md, "The cross-channel prior"; training seeds 1, 2):
+    # From python research/sweep_xc.py (docs/admm.md, "The cross-channel prior"; training seeds 1, 2):
     # uv-xc beats Malvar on PSNR and mean CIEDE2000 (centre, mean image) everywhere at 0.5-50 lux;
     # uvst-xc, like uvst, stays close to Malvar because (s, t) smoothing costs deadleaves' mean image.
     "admm-uv-xc": AdmmDefaults(dims="uv", lam_per_sigma=0.15, change_per_sigma=0.1, max_iter=45, xc_per_sigma=0.03),
     "admm-uvst-xc": AdmmDefaults(dims="uvst", lam_per_sigma=0.03, change_per_sigma=0.05, max_iter=60,
                                  xc_per_sigma=0.01),
+    # The prior along the epipolar lines (dims "epi", lfcl/solvers/epi.py), from research/fit_epi.py
+    # (docs/admm.md, "admm-epi"; training seed 1 of charts, deadleaves, finetexture, 48x48 lenses).
+    "admm-epi": AdmmDefaults(dims="epi", lam_per_sigma=0.3, change_per_sigma=0.0, max_iter=20, rho=1.0, cg_steps=5,
+                             fb_per_sigma=0.3),
 }
 
 
@@ -160,41 +167,14 @@ def lens_row_bands(lens_rows: int, per_row: tuple[int, int], limits: tuple[int, 
     return [(s0, min(s0 + per_band, lens_rows)) for s0 in range(0, lens_rows, per_band)]
 
 
-# Freezing converged lenses (lfcl/solvers/freeze.py): the methods whose prior couples no two
-# lenses, the fraction of the stop tolerance used by freeze=True, and the default (docs/auto.md).
-FREEZABLE = ("admm-uv", "admm-uv-xc")
-FREEZE_FRACTION = 0.3
-FREEZE_DEFAULT = False
-
-#: The first estimates an ADMM method can start from (``demosaic_lightfield(start=...)``).
-
-
-def freeze_settings_for(method: str, freeze) -> FreezeSettings | None:
-    """The freezing ``demosaic_lightfield(freeze=...)`` asks for with ``method`` (None: off)."""
-    if freeze is None:
-        freeze = FREEZE_DEFAULT if method in FREEZABLE else False
-    settings = freeze if isinstance(freeze, FreezeSettings) else None  # also says when the solver shrinks
-    freeze = settings.fraction if settings is not None else freeze
-    if freeze is False or (not isinstance(freeze, bool) and freeze == 0):
-        return None
-    if method not in FREEZABLE:
-        raise ValueError(f"freeze needs a prior that couples no two lenses ({', '.join(FREEZABLE)}), not {method}")
-    if freeze is True:
-        return FreezeSettings(fraction=FREEZE_FRACTION)
-    if not isinstance(freeze, (int, float)) or not 0 < freeze <= 1:
-        raise ValueError(f"freeze must be True, False or a fraction of the stop tolerance in (0, 1], got {freeze!r}")
-    return settings or FreezeSettings(fraction=float(freeze))
-
-
 def flat_threshold_for(method: str, skip_flat) -> float | None:
     """The p threshold ``demosaic_lightfield(skip_flat=...)`` tests lenses with (None: no test).
 
-    None: on (FLAT_P) for the methods whose prior couples no two lenses, off for the others;
-    True: FLAT_P; False: off; a number in (0, 1): that threshold.
+    None or False: off (the default: on fine texture off the focal plane the chi-square test took
+    grain for noise and cost up to 5 dB, docs/auto.md); True: FLAT_P; a number in (0, 1): that
+    threshold, for the methods whose prior couples no two lenses.
     """
-    if skip_flat is None:
-        return FLAT_P if method in SKIPPABLE else None
-    if skip_flat is False:
+    if skip_flat is None or skip_flat is False:  # off by default: it took fine texture for noise (docs/auto.md)
         return None
     if method not in SKIPPABLE:
         raise ValueError(f"skipping flat lenses needs a prior that couples no two lenses ({', '.join(SKIPPABLE)}), "
@@ -228,10 +208,9 @@ def _noise_for_flat_test(noise, raw_mosaic, pattern, pitch, origin, asked) -> tu
 def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
                         lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
                         device=None, callback=None, max_memory: int | None = None,
-                        lens_response=None, region_rows: int | None = None,
-                        tolerance_db: float | None = None, freeze: bool | float | FreezeSettings | None = None,
+                        lens_response=None, tolerance_db: float | None = None,
                         start: str | None = None, skip_flat: bool | float | None = None,
-                        auto_view: str = "both") -> DemosaicResult:
+                        auto_view: str = "both", safety_net: bool = True) -> DemosaicResult:
     """Demosaic (and denoise) a normalised lenslet mosaic [H, W] into [3, H, W] planes.
 
     H and W must be whole multiples of the pitch (crop first). ``noise`` defaults to
@@ -245,16 +224,6 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     response squared, leaving the dark corners out.
     ``tolerance_db``: stop when an iteration can move PSNR by less than this many dB
     (:func:`admm_params`); default: the method's own rule.
-    ``region_rows`` (admm-uv only): solve bands of this many lens rows one by one,
-    each stopping on its own rule, so that regions that converge early (flat ones)
-    stop early; exact for the (u, v) prior, which couples no two lenses
-    (measured in docs/auto.md: it did not pay).
-    ``freeze`` (admm-uv, admm-uv-xc): freeze blocks of lenses whose rms change per
-    iteration falls to this fraction of the stop tolerance and drop them from the work,
-    while the global rule decides the stop (lfcl/solvers/freeze.py); True: the fraction
-    FREEZE_FRACTION, False or 0: off, None: FREEZE_DEFAULT (measured in docs/auto.md);
-    a FreezeSettings also sets when the solver shrinks. What froze goes into
-    ``parameters["freeze"]``; after a move, ``callback``'s x holds the lenses still solved.
     ``start`` (ADMM methods): the first estimate, ``"malvar"`` (the paper's, and the
     default), ``"linear4d"`` (the learned 4D filter, which also reads the neighbouring
     lenses: measured in docs/auto.md, it gains on textured and multi-plane scenes and
@@ -271,7 +240,46 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     packed into a smaller mosaic; None: on for those methods at p threshold FLAT_P, True:
     the same, False: off, a number: that p threshold. Recorded in ``parameters["flat_lenses"]``;
     ``callback``'s x is then the packed mosaic's.
+    ``safety_net`` (every method but Malvar; on by default): each lens's colour means are
+    soft-thresholded towards Malvar's at the noise of a lens mean (lfcl/safety_net.py), so that no
+    lens's mean strays from Malvar's further than the noise explains; recorded in
+    ``parameters["safety_net"]``.
     """
+    result = _demosaic_lightfield(mosaic, pattern, pitch, method, origin=origin, lam=lam, iterations=iterations,
+                                  rho=rho, strength=strength, noise=noise, device=device, callback=callback,
+                                  max_memory=max_memory, lens_response=lens_response,
+                                  tolerance_db=tolerance_db, start=start, skip_flat=skip_flat,
+                                  auto_view=auto_view, safety_net=safety_net)
+    if not safety_net or result.method in ("malvar", "auto") or method == "auto":
+        return result  # auto: its pick ran with the net already
+    return _with_safety_net(result, mosaic, pattern, pitch, origin, lens_response, device)
+
+
+def _with_safety_net(result: DemosaicResult, mosaic, pattern, pitch, origin, lens_response, device) -> DemosaicResult:
+    """``result`` after the safety net (lfcl/safety_net.py), on the mosaic the method saw."""
+    from .safety_net import apply_safety_net
+
+    began = time.perf_counter()
+    mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
+    noise, why = _noise_for_flat_test(result.noise, mosaic, pattern, pitch, origin, asked=None)
+    if noise is None:  # a raw too small to estimate the noise from: the outputs say the net did not act
+        report = {"lenses": 0, "lenses_from_malvar": 0, "why": why.replace("not tested", "not applied")}
+        return dataclasses.replace(result, parameters={**result.parameters, "safety_net": report})
+    if lens_response is not None:
+        mosaic, _ = flat_field(mosaic, lens_response)
+    planes, report = apply_safety_net(get_runtime(device), result.planes, mosaic, pattern, pitch, origin, noise)
+    _check_finite(planes, "the safety net", mosaic)
+    return dataclasses.replace(result, planes=planes, parameters={**result.parameters, "safety_net": report},
+                               seconds=result.seconds + time.perf_counter() - began, noise=noise)
+
+
+def _demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
+                        lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
+                        device=None, callback=None, max_memory: int | None = None,
+                        lens_response=None, tolerance_db: float | None = None,
+                        start: str | None = None, skip_flat: bool | float | None = None,
+                        auto_view: str = "both", safety_net: bool = True) -> DemosaicResult:
+    """:func:`demosaic_lightfield` without its safety net."""
     method = parse_method(method)
     mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
     if mosaic.ndim != 2:
@@ -293,15 +301,13 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         result = demosaic_lightfield(mosaic, pattern, pitch, choice.method, origin=origin, lam=lam,
                                      iterations=iterations, rho=rho, strength=strength * choice.strength,
                                      noise=noise, device=device, callback=callback, max_memory=max_memory,
-                                     lens_response=lens_response, region_rows=region_rows,
-                                     tolerance_db=tolerance_db,
-                                     freeze=freeze if choice.method in FREEZABLE else None,
+                                     lens_response=lens_response, tolerance_db=tolerance_db,
                                      start=start if start is not None else choice.start,
-                                     skip_flat=skip_flat if choice.method in SKIPPABLE else None)
+                                     skip_flat=skip_flat if choice.method in SKIPPABLE else None,
+                                     safety_net=safety_net)
         result.parameters = {**result.parameters, "auto": {**choice.as_dict(),
                                                            **({"replaced": replaced} if replaced else {})}}
         return result
-    freeze_settings = freeze_settings_for(method, freeze)
     flat_threshold = flat_threshold_for(method, skip_flat)
     raw_mosaic, lens_weights = mosaic, None
     if lens_response is not None:
@@ -316,6 +322,11 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         _check_finite(planes, "linear4d", mosaic)
         return DemosaicResult(planes, method, {}, 0, time.perf_counter() - began, "direct", [], noise)
     b = runtime.to_device(mosaic)
+    if method == "admm-epi" and start is None:  # its start follows the noise (lfcl/solvers/epi.py EPI_SCHEDULE)
+        from .solvers.epi import epi_setting
+
+        noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
+        start = epi_setting(max(noise.sigma, 1e-6)).start
     start = "malvar" if method == "malvar" else start or "malvar"
     guard = None
     if start in ("linear4d", "guarded"):
@@ -338,7 +349,8 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     if not math.isfinite(Reductions(runtime).abs_sum(x0)):  # on the device: no 3-plane copy to the host
         _check_finite(np.array([np.inf]), f"the {start} start", mosaic)
     defaults = ADMM_DEFAULTS[method]
-    needs_sigma = lam is None or tolerance_db is not None or (iterations is None and defaults.change_per_sigma > 0)
+    needs_sigma = lam is None or tolerance_db is not None or (iterations is None and defaults.change_per_sigma > 0) \
+        or defaults.dims == "epi"  # its iterations and lam_fb follow the noise (lfcl/solvers/epi.py)
     if noise is None and needs_sigma:
         noise = estimate_noise(raw_mosaic, pattern, pitch, origin)  # the noise of the raw, as lambda expects
     sigma = noise.sigma if noise is not None else 0.0  # unused when lam and iterations are given
@@ -366,14 +378,24 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
             b = copy(b, runtime.empty(packed_shape), table)
             x0 = copy(x0, runtime.empty((3, *packed_shape)), table)
     H, W = b.shape
-    if region_rows is not None and (dims != "uv" or int(region_rows) < 1):
-        raise ValueError(f"region_rows needs admm-uv and a whole number of lens rows >= 1, got {method} "
-                         f"and {region_rows!r}: the other priors couple neighbouring lenses")
+    if dims == "epi":  # the prior along the epipolar lines, with the disparity from the raw (lfcl/solvers/epi.py)
+        from .solvers.epi import demosaic_epi, epi_params
+
+        if tolerance_db is None:  # lam, lam_fb and the iterations follow the noise (EPI_SCHEDULE)
+            params, lam_fb = epi_params(params, sigma, lam=lam, iterations=iterations, strength=strength)
+        else:
+            lam_fb = params.lam * defaults.fb_per_sigma / defaults.lam_per_sigma
+        planes, extra, run = demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params, lam_fb, noise,
+                                          device, lens_weights, callback, max_memory)
+        parameters = {**dataclasses.asdict(params), "start": start, **extra}
+        if guard is not None:
+            parameters["start_guard"] = guard
+        return DemosaicResult(planes, method, parameters, run.iterations, time.perf_counter() - began,
+                              run.stop_reason, [dict(dataclasses.asdict(r), band=0) for r in run.history], noise)
     budget = int(max_memory) if max_memory is not None else int(0.8 * runtime.device.global_mem_size)
     needed = solver_bytes((H, W), dims, exact=dims == "uv", cross_channel=params.cross_channel)
     largest = solver_largest_buffer((H, W), dims)
     fits = needed <= budget and largest <= runtime.device.max_mem_alloc_size
-    freeze_reports = []
 
     def samples_in(rows: slice) -> int | None:
         """The samples the stop rule's rms change is over, for these sensor rows (None: all of x).
@@ -385,17 +407,12 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         return None if real is None else int(real[rows.start // U:rows.stop // U].sum()) * 3 * U * V
 
     def solve(solver, b, x0, samples):
-        if freeze_settings is None:
-            return solver.solve(b, x0, params, callback=callback, lens_weights=lens_weights, samples=samples)
-        result, report = solve_with_freezing(solver, b, x0, params, freeze_settings, callback=callback,
-                                             lens_weights=lens_weights, samples=samples)
-        freeze_reports.append(report)
-        return result
+        return solver.solve(b, x0, params, callback=callback, lens_weights=lens_weights, samples=samples)
 
     planes_packed = packing is not None  # planes on the host that hold the packed lenses only
     if real is not None and not real.any():  # every lens is flat: nothing to solve
         planes, runs, band_rows = np.zeros((3, H, W), np.float32), [], []
-    elif fits and region_rows is None:
+    elif fits:
         result = solve(AdmmSolver(runtime, (H, W), pattern, pitch, dims, origin), b, x0, samples_in(slice(0, H)))
         x, runs, band_rows = result.x, [dataclasses.replace(result, x=None)], [H]
         if packing is not None:  # the solved lenses back to their places and the flat ones' means, on the device
@@ -408,9 +425,6 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         per_row = (solver_bytes((U, W), dims, exact=True, cross_channel=params.cross_channel),
                    solver_largest_buffer((U, W), dims))
         bands = lens_row_bands(H // U, per_row, (budget, runtime.device.max_mem_alloc_size))
-        if region_rows is not None:  # regions no larger than memory allows
-            step = min(int(region_rows), bands[0][1] - bands[0][0])
-            bands = [(s0, min(s0 + step, H // U)) for s0 in range(0, H // U, step)]
         x0_host = x0.get()
         del b, x0
         if packing is not None:
@@ -456,9 +470,6 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         parameters["flat_lenses"] = found.as_dict(packing.grid[0] if packing is not None else None)
     elif dims == "uv":
         parameters["flat_lenses"] = {"flat_lenses": 0, "why": flat_why}
-    if freeze_reports:
-        parameters["freeze"] = {**combine_reports(freeze_reports), "fraction": freeze_settings.fraction,
-                                "shrink_at": freeze_settings.shrink_at}
     return DemosaicResult(
         planes, method, parameters, max((run.iterations for run in runs), default=0), time.perf_counter() - began,
         reason, history, noise,

@@ -16,10 +16,13 @@ kind             content                                      files
 ``views-each``   every view, one file each                    ``view_UU_VV.exr``
 ``refocus``      shift-and-add focal stack (lfcl.refocus)     ``refocus_+0.25.exr`` per slope
 ``lightfield``   the light field ``[S, T, U, V, 3]``          ``lightfield.npy``
+``depth``        disparity per lens, from the raw (depth.md)  ``depth*.exr``, ``depth.png``
 ===============  ===========================================  ================================
 
 Images are EXR (float32, scene-linear camera RGB, unclipped) or, with
-``fmt="tiff"``, 16-bit TIFF (linear camera RGB clipped to [0, 1]); with previews,
+``fmt="tiff"``, 16-bit TIFF (linear camera RGB clipped to [0, 1]) or, with ``fmt="dng"``,
+LinearRaw DNG for raw editors (16 bits, clipped to [0, 1], with the raw's colour matrix and
+white balance: lfcl.linear_dng, docs/darktable.md); with previews,
 each image also gets an 8-bit sRGB PNG of the same name (lfcl.colour).
 """
 
@@ -37,11 +40,13 @@ from .layout import tiled_views
 from .metrics import centre_view, mean_image
 from .refocus import refocus, slope_label
 
-KINDS = ("center", "mean", "views", "views-each", "refocus", "lightfield")
-FORMATS = {"exr": ".exr", "tiff": ".tif"}
+KINDS = ("center", "mean", "views", "views-each", "refocus", "lightfield", "depth")
+FORMATS = {"exr": ".exr", "tiff": ".tif", "dng": ".dng"}
 ENCODINGS = {
     "exr": "scene-linear camera RGB (the normalised raw's units), float32, not clipped",
     "tiff": "linear camera RGB (the normalised raw's units), clipped to [0, 1], 16 bits",
+    "dng": "LinearRaw DNG: linear camera RGB (the normalised raw's units) x 65535, clipped to [0, 65535], "
+           "16 bits, black 0, white 65535; the raw's colour matrix and as-shot neutral (see dng)",
     "png": "sRGB preview, 8 bits (see colour)",
 }
 
@@ -59,7 +64,7 @@ def parse_format(text: str) -> str:
     fmt = str(text).strip().lower()
     fmt = {"tif": "tiff", "openexr": "exr"}.get(fmt, fmt)
     if fmt not in FORMATS:
-        raise ValueError(f"unknown --format {text!r}: choose exr or tiff")
+        raise ValueError(f"unknown --format {text!r}: choose exr, tiff or dng")
     return fmt
 
 
@@ -75,9 +80,10 @@ class PlannedFile:
 
     name: str
     kind: str  # an output kind
-    writer: str  # "image", "preview", "npy" or "json"
+    writer: str  # "image", "preview", "dng", "npy" or "json"
     data: object
     metadata: dict | None = None
+    writer_args: dict | None = None  # more keyword arguments of the writer (the DNG's camera)
 
 
 @dataclasses.dataclass
@@ -98,12 +104,16 @@ class OutputPlan:
 
 
 def plan_outputs(lightfield: np.ndarray, kinds, *, slopes=(), fmt: str = "exr", previews: bool = True,
-                 metadata: dict | None = None, colour: ColourPipeline | None = None) -> OutputPlan:
+                 metadata: dict | None = None, colour: ColourPipeline | None = None, camera=None,
+                 depth=None) -> OutputPlan:
     """Compute every output of ``kinds`` (and only those) from ``lightfield`` ``[S, T, U, V, 3]``.
 
     ``slopes``: the refocus slopes (used with ``refocus``). ``metadata``: what every
     file records (method, parameters, ...). ``colour``: the camera -> sRGB pipeline
-    for the previews (default: camera RGB taken as linear sRGB, neutral balance).
+    for the previews (default: camera RGB taken as linear sRGB, neutral balance). ``camera``:
+    with ``fmt="dng"``, the DNGs' names and colour tags (an :class:`lfcl.linear_dng.DngCamera`;
+    default: camera RGB declared linear sRGB, neutral balance). ``depth``: with ``depth``, the
+    :class:`lfcl.depth.DisparityMap` (lfcl.depth.output writes it; always EXR + PNG).
     """
     kinds = parse_outputs(",".join(kinds)) if not isinstance(kinds, str) else parse_outputs(kinds)
     fmt = parse_format(fmt)
@@ -113,7 +123,7 @@ def plan_outputs(lightfield: np.ndarray, kinds, *, slopes=(), fmt: str = "exr", 
         raise ValueError(f"a light field must have shape [S, T, U, V, 3], got {lightfield.shape}")
     S, T, U, V, _ = lightfield.shape
     base = dict(metadata or {})
-    images = [k for k in kinds if k != "lightfield"]
+    images = [k for k in kinds if k not in ("lightfield", "depth")]
     skipped = [{"output": k, "reason": "not asked for (--outputs)"} for k in KINDS if k not in kinds]
     if "refocus" in kinds and not slopes:
         raise ValueError("the refocus output needs slopes (--refocus start:stop:step or a comma list)")
@@ -137,7 +147,11 @@ def plan_outputs(lightfield: np.ndarray, kinds, *, slopes=(), fmt: str = "exr", 
         meta = {**base, "output": kind, **extra, "encoding": ENCODINGS[fmt]}
         if colour_meta is not None:
             meta["preview_colour"] = colour_meta
-        files.append(PlannedFile(stem + ext, kind, "image", np.ascontiguousarray(image, np.float32), meta))
+        if fmt == "dng":
+            files.append(PlannedFile(stem + ext, kind, "dng", np.ascontiguousarray(image, np.float32), meta,
+                                     {"camera": camera}))
+        else:
+            files.append(PlannedFile(stem + ext, kind, "image", np.ascontiguousarray(image, np.float32), meta))
         if scale is not None:
             pmeta = {**base, "output": kind, **extra, "encoding": ENCODINGS["png"], "colour": colour_meta}
             files.append(PlannedFile(stem + ".png", kind, "preview", colour.preview(image, scale), pmeta))
@@ -166,6 +180,13 @@ def plan_outputs(lightfield: np.ndarray, kinds, *, slopes=(), fmt: str = "exr", 
                 if scale is not None:
                     entry["preview"] = stem + ".png"
                 refocus_list.append(entry)
+        elif kind == "depth":  # lfcl.depth.DisparityMap from the raw (Outputs.plan); always EXR + PNG
+            if depth is None:
+                raise ValueError("the depth output needs the disparity map (lfcl.depth.estimate_disparity)")
+            from .depth.output import depth_files
+
+            files.extend(PlannedFile(name, kind, "image", image, meta)
+                         for name, image, meta in depth_files(depth, base))
         elif kind == "lightfield":
             files.append(PlannedFile("lightfield.npy", kind, "npy", np.ascontiguousarray(lightfield, np.float32)))
         seconds[kind] = time.perf_counter() - start
@@ -181,6 +202,10 @@ def _write_one(out_dir: Path, f: PlannedFile) -> Path:
     path = out_dir / f.name
     if f.writer in ("image", "preview"):
         return write_image(path, f.data, f.metadata)
+    if f.writer == "dng":
+        from .linear_dng import write_linear_dng
+
+        return write_linear_dng(path, f.data, metadata=f.metadata, **(f.writer_args or {}))
     if f.writer == "npy":
         return write_npy(path, f.data)
     if f.writer == "json":  # data may be a callable: a summary that reports the writes before it

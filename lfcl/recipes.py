@@ -3,7 +3,7 @@
 A recipe is a flat TOML table; every key is optional and has a default (:data:`DEFAULTS`)::
 
     description = "..."           # free text
-    method = "admm-uv"            # malvar, admm-uv, admm-st, admm-uvst
+    method = "admm-uvst"          # any of lfcl.method_names.METHODS
     strength = 1.0                # > 0, multiplies the default lambda
     lambda = 0.01                 # >= 0; absent: follows the noise level
     iterations = 20               # >= 1; absent: the method's early-stopping rule
@@ -23,9 +23,11 @@ import importlib.resources
 import tomllib
 from pathlib import Path
 
+from .method_names import DEFAULT_METHOD
+
 DEFAULTS = {
     "description": "",
-    "method": "admm-uv",
+    "method": DEFAULT_METHOD,
     "strength": 1.0,
     "lambda": None,
     "iterations": None,

@@ -31,6 +31,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .auto_report import skipped_by_auto
+from .method_names import DEFAULT_METHOD
 from .raw import Mosaic
 
 DEFAULT_PITCH = 9
@@ -244,8 +245,10 @@ class Demosaic:
     ``start``: the ADMM methods' first estimate (``lfcl.methods.STARTS``; aligned grids only), None:
     the method's (Malvar; ``auto``: the one its rule names).
     ``skip_flat``: leave lenses that are flat within the noise out of the solve and give them their
-    colour means (lfcl/flat_lenses.py; admm-uv, admm-uv-xc, aligned grids); None: on for those methods,
-    False: off, True or a p threshold in (0, 1): on.
+    colour means (lfcl/flat_lenses.py; admm-uv, admm-uv-xc, aligned grids); None or False: off (the
+    default), True or a p threshold in (0, 1): on.
+    ``safety_net``: keep every lens's colour means within the noise of Malvar's (lfcl/safety_net.py;
+    aligned grids; on by default).
     ``auto_view``: with ``auto``, the view its rule was judged on (lfcl.auto.VIEWS; ``lfcl process``
     passes lfcl.auto.view_for_outputs of its outputs).
     ``device``: an OpenCL device spec or None (``LFCL_DEVICE``, else the first device).
@@ -253,10 +256,10 @@ class Demosaic:
 
     name = "demosaic"
 
-    def __init__(self, method: str = "admm-uv", lam: float | None = None, iterations: int | None = None,
+    def __init__(self, method: str = DEFAULT_METHOD, lam: float | None = None, iterations: int | None = None,
                  strength: float = 1.0, device=None, callback=None, max_memory: int | None = None,
                  tolerance_db: float | None = None, start: str | None = None,
-                 skip_flat: bool | float | None = None, auto_view: str = "both"):
+                 skip_flat: bool | float | None = None, auto_view: str = "both", safety_net: bool = True):
         from .auto import check_view
         from .methods import STARTS, flat_threshold_for, parse_method
 
@@ -286,6 +289,9 @@ class Demosaic:
         except ValueError as e:
             raise ValueError(f"Demosaic: {e}") from None
         self.skip_flat = skip_flat
+        if not isinstance(safety_net, bool):
+            raise ValueError(f"Demosaic: safety_net must be True or False, got {safety_net!r}")
+        self.safety_net = safety_net
         try:
             self.auto_view = check_view(auto_view)
         except ValueError as e:
@@ -297,7 +303,7 @@ class Demosaic:
     def options(self) -> dict:
         return {"method": self.method, "lambda": self.lam, "iterations": self.iterations, "strength": self.strength,
                 "tolerance_db": self.tolerance_db, "max_memory": self.max_memory, "start": self.start,
-                "skip_flat": self.skip_flat, **({"auto_view": self.auto_view} if self.method == "auto" else {})}
+                "skip_flat": self.skip_flat, "safety_net": self.safety_net, **({"auto_view": self.auto_view} if self.method == "auto" else {})}
 
     def __call__(self, gridded: Gridded) -> Demosaiced:
         _need(gridded, Gridded, "Demosaic", "a Gridded (from Grid)")
@@ -342,7 +348,8 @@ class Demosaic:
                                          noise=noise, device=self.device, callback=self.callback,
                                          lens_response=gridded.lens_response, max_memory=self.max_memory,
                                          tolerance_db=self.tolerance_db, start=self.start,
-                                         skip_flat=self.skip_flat, auto_view=self.auto_view)
+                                         skip_flat=self.skip_flat, auto_view=self.auto_view,
+                                         safety_net=self.safety_net)
             S, T = gridded.lenses
             lightfield = planes_to_exchange(result.planes, LightFieldShape(S, T, P, P))
         meta = {
@@ -400,8 +407,23 @@ class Outputs:
 
             colour = ColourPipeline.from_mosaic(demosaiced.mosaic)
         colour_seconds = time.perf_counter() - start
+        camera = None
+        if self.fmt == "dng":  # the raw's names, colour matrix and white balance go into every DNG
+            from .linear_dng import DngCamera
+
+            camera = DngCamera.from_mosaic(demosaiced.mosaic)
+        depth, depth_seconds = None, 0.0
+        if "depth" in self.outputs:  # from the raw itself, not from the demosaiced light field (docs/depth.md)
+            from .depth.output import depth_from_mosaic
+
+            start = time.perf_counter()
+            depth = depth_from_mosaic(demosaiced.mosaic, demosaiced.metadata["geometry"])
+            depth_seconds = time.perf_counter() - start
         plan = plan_outputs(demosaiced.lightfield, self.outputs, slopes=self.slopes, fmt=self.fmt,
-                            previews=self.previews, metadata=self.file_metadata(demosaiced), colour=colour)
+                            previews=self.previews, metadata=self.file_metadata(demosaiced), colour=colour,
+                            camera=camera, depth=depth)
+        if depth is not None:
+            plan.seconds["depth"] = plan.seconds.get("depth", 0.0) + depth_seconds
         if "previews-setup" in plan.seconds:
             plan.seconds["previews-setup"] += colour_seconds
         return plan

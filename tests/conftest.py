@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
+# The fitting and sweep scripts live outside the wheel in research/; the tests of what they make import them.
+RESEARCH = Path(__file__).resolve().parents[1] / "research"
+sys.path.append(str(RESEARCH))
 
 
 def shared_path(*parts: str) -> Path:

@@ -138,3 +138,34 @@ def test_bench_pareto_takes_an_admm_method_with_its_start(tmp_path):
     bad = _invoke(["bench", "pareto", "--lenses", "8x8", "--budgets", "1", "--methods", "admm-uv:nearest",
                    "-o", str(tmp_path / "q")])
     assert bad.exit_code != 0 and "NAME:START" in bad.output
+
+
+def test_bench_matrix_rows_and_the_worst_cell_first(tmp_path):
+    result = _invoke(["bench", "matrix", "--scenes", "charts,finetexture", "--lux", "12", "--methods",
+                      "admm-uvst,admm-uv", "--lenses", "8", "--shared", str(tmp_path / "none"), "--json"])
+    assert result.exit_code == 0, result.output
+    rows = json.loads(result.stdout)
+    assert [(r["capture"], r["method"]) for r in rows] == [("charts", "admm-uvst"), ("charts", "admm-uv"),
+                                                           ("finetexture", "admm-uvst"), ("finetexture", "admm-uv")]
+    for row in rows:
+        assert row["lux"] == 12 and row["net"] is not None  # the safety net ran and said on how many lenses
+    from lfcl.evaluate import run_method, simulated_capture
+
+    capture = simulated_capture(8, 12, seed=7, scene="charts")  # the matrix's held-out seed
+    malvar, uvst = run_method(capture, "malvar"), run_method(capture, "admm-uvst")
+    assert rows[0]["centre_gain"] == pytest.approx(uvst["psnr_center"] - malvar["psnr_center"], abs=1e-9)
+    assert rows[0]["mean_gain"] == pytest.approx(uvst["psnr_mean"] - malvar["psnr_mean"], abs=1e-9)
+    from lfcl.bench.matrix import format_rows, worst
+
+    table = format_rows(rows).splitlines()
+    first = min(rows, key=worst)
+    assert table[2].startswith(f"| {first['capture']} | 12 | {first['method']} |")
+    assert table[-1].startswith(f"worst cell: {first['capture']} at 12 lux")
+
+
+def test_bench_matrix_finds_the_real_light_fields_it_is_given(tmp_path):
+    from lfcl.bench.matrix import real_lightfields
+
+    (tmp_path / "realdata" / "hci_epinet" / "antinous").mkdir(parents=True)
+    assert real_lightfields(tmp_path) == {"antinous": str(tmp_path / "realdata" / "hci_epinet" / "antinous")}
+    assert real_lightfields(tmp_path / "none") == {}

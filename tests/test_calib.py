@@ -132,10 +132,10 @@ def test_white_image_of_a_hex_grid():
 
 
 def test_aligned_simulation_is_unchanged_by_default():
-    """The default (aligned-square) path still gives its five files and the same raw as before."""
+    """The default (aligned-square) path still gives its files (five, and the truth disparity) and the same raw."""
     cap = simulate("charts", lenses=(6, 7), seed=3)
     assert cap.geometry.grid == "aligned-square" and cap.raw.shape == (54, 63)
-    assert cap.meta["files"] == ["raw.dng", "white.dng", "meta.json", "truth.npy", "truth_views.exr"]
+    assert cap.meta["files"] == ["raw.dng", "white.dng", "meta.json", "truth.npy", "truth_views.exr", "disparity.npy"]
 
 
 # --- accuracy on simulated white images of known geometry ---------------------------------

@@ -7,8 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from lfcl.auto import choose
-from lfcl.bench.auto_rule import fit_rule
+from lfcl.auto import choose, fit_rule
 from lfcl.flatfield import DEFAULT_THRESHOLD
 from lfcl.lens_ratio import BAND_ROWS, cross_lens_ratio
 from lfcl.noise import NoiseEstimate
@@ -127,18 +126,19 @@ def test_what_the_ratio_tells_apart(rng):
 
 
 def _rule_row(sigma, ratio):
-    return {"sigma": sigma, "lens_ratio": ratio,
-            "results": {"malvar": {"psnr_center": 40.0, "psnr_mean": 45.0, "seconds": 0.01}}}
+    return {"capture": "charts 1", "sigma": sigma, "lens_ratio": ratio,
+            "malvar": {"center": 40.0, "mean": 45.0, "seconds": 0.01},
+            "gains": {"admm-uv@1": {"center": 1.0, "mean": 0.5, "seconds": 0.1}}}
 
 
 def test_auto_says_when_the_content_lies_outside_what_its_band_was_fitted_on():
-    rule = fit_rule([_rule_row(0.005, 3.0), _rule_row(0.0052, 40.0), _rule_row(0.0051, None)], within=0.1)
+    rule = fit_rule([_rule_row(0.005, 3.0), _rule_row(0.0052, 40.0), _rule_row(0.0051, None)], "both")
     assert rule[0]["lens_ratio_range"] == [3.0, 40.0]
     inside = choose(0.005, rule, lens_ratio=6.0)
     assert inside.seen_content is True and "has not seen" not in inside.reason
     outside = choose(0.005, rule, lens_ratio=1.2)
     assert outside.method == inside.method and outside.seen_content is False
-    assert "cross-lens ratio 1.20 lies outside the 3.00-40.00" in outside.reason and "docs/auto.md" in outside.reason
+    assert "cross-lens ratio 1.20 lies outside the 3.00-40.00" in outside.reason
     unknown = choose(0.005, rule)
     assert unknown.lens_ratio is None and unknown.seen_content is None and unknown.reason in inside.reason
 
@@ -155,65 +155,3 @@ def test_auto_records_the_ratio_of_the_raw(rng):
     assert auto["lens_ratio"] == pytest.approx(cross_lens_ratio(mosaic, (9, 9), noise))
     trained = choose(noise.sigma)  # the shipped band
     assert isinstance(auto["seen_content"], bool) and trained.method == auto["method"]
-
-
-def _rows(sigma, ratio, best_mean):
-    """Two candidates: admm-uv@1 has the better centre view, ``best_mean`` the better mean image."""
-    other = "admm-uvst@1" if best_mean == "admm-uv@1" else "admm-uv@1"
-    return {"sigma": sigma, "lens_ratio": ratio, "scene": "s", "seed": 0, "lux": 1,
-            "results": {best_mean: {"psnr_center": 40.0, "psnr_mean": 46.0, "seconds": 0.1},
-                        other: {"psnr_center": 40.0 + (other == "admm-uv@1"), "psnr_mean": 45.0, "seconds": 0.1}}}
-
-
-def test_fit_rules_gives_low_ratio_content_a_mean_image_rule_of_its_own():
-    from lfcl.auto import LOW_RATIO_BELOW
-    from lfcl.bench.auto_rule import fit_rules, held_out_losses
-
-    synthetic = [_rows(0.005, 6.0, "admm-uv@1"), _rows(0.0051, None, "admm-uv@1")]
-    real_like = [_rows(0.0052, 1.5, "admm-uvst@1")]
-    rules = fit_rules(synthetic + real_like, within=0.1)
-    assert rules["low_ratio"]["below"] == LOW_RATIO_BELOW and rules["low_ratio"]["captures"] == 1
-    assert list(rules["low_ratio"]["rules_by_view"]) == ["mean"]  # the centre view keeps the default rule
-    assert rules["rules_by_view"]["mean"][0]["candidate"] == "admm-uv@1"  # fitted on the synthetic rows alone
-    assert rules["rules_by_view"]["mean"][0]["captures"] == 2
-    assert rules["low_ratio"]["rules_by_view"]["mean"][0]["candidate"] == "admm-uvst@1"
-    # the raw's ratio picks the class, for the mean image only
-    low = choose(0.005, lens_ratio=1.2, view="mean", rules=rules)
-    assert (low.method, low.content) == ("admm-uvst", "low-ratio")
-    assert low.reason.startswith(f"the raw's cross-lens ratio 1.20 lies below {LOW_RATIO_BELOW:g}")
-    assert "has not seen such content" in low.reason and "the rule for both views lost" not in low.reason
-    for ratio, view in ((1.2, "center"), (1.2, "both"), (None, "mean"), (LOW_RATIO_BELOW, "mean"), (6.0, "mean")):
-        default = choose(0.005, lens_ratio=ratio, view=view, rules=rules)
-        assert (default.method, default.content) == ("admm-uv", "default"), (ratio, view)
-    assert [h["candidate"] for h in held_out_losses(real_like + synthetic, rules, "mean")] == \
-        ["admm-uvst@1", "admm-uv@1", "admm-uv@1"]
-    from lfcl.bench.auto_check import check_rows
-
-    assert [c["auto"] for c in check_rows(real_like + synthetic, rules, "mean")] == \
-        ["admm-uvst@1", "admm-uv@1", "admm-uv@1"]
-    assert "low_ratio" not in fit_rules(synthetic, within=0.1) and "low_ratio" not in fit_rules(
-        synthetic + real_like, within=0.1, low_ratio_views=())
-
-
-def test_auto_runs_the_low_ratio_rule_for_the_mean_image(rng, monkeypatch):
-    import lfcl.auto
-    from lfcl.methods import demosaic_lightfield
-
-    def band(candidate):
-        return [{"sigma_from": 0.0, "sigma_to": 1.0, "candidate": candidate, "worst_loss_db": 0.0, "within_db": 0.1,
-                 "captures": 1}]
-
-    rules = {"rule": band("malvar"), "rules_by_view": {"mean": band("malvar"), "center": band("malvar")},
-             "low_ratio": {"below": 1e9, "fitted_on": ["test"], "rules_by_view": {"mean": band("admm-uv@1")}}}
-    monkeypatch.setattr(lfcl.auto, "load_rules", lambda: rules)
-    flat_lenses = rng.random((20, 20, 1, 1)) * np.ones((1, 1, 9, 9))
-    flat_lenses[:, :, :, 4] += 0.2
-    mosaic = lenses_mosaic(flat_lenses * 0.5 + rng.normal(0, 0.004, flat_lenses.shape))
-    noise = NoiseEstimate(gain=0.0, floor=0.004**2, sigma=0.004, source="raw")
-    mean = demosaic_lightfield(mosaic, "GRBG", (9, 9), "auto", noise=noise, auto_view="mean").parameters["auto"]
-    center = demosaic_lightfield(mosaic, "GRBG", (9, 9), "auto", noise=noise, auto_view="center").parameters["auto"]
-    assert (mean["method"], mean["content"], mean["view"]) == ("admm-uv", "low-ratio", "mean")
-    assert (center["method"], center["content"], center["view"]) == ("malvar", "default", "center")
-    from lfcl.auto_report import skipped_by_auto
-
-    assert skipped_by_auto(mean) == []  # weighed against the low-ratio band it came from

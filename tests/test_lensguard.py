@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lfcl.ops.lensguard import LensGuard, lens_disagreement_np, take_lenses_np
+from lfcl.ops.lensguard import LensGuard, guard_lens_means_np, lens_disagreement_np, take_lenses_np
 
 
 def test_disagreement_is_the_rms_difference_in_noise_sigmas():
@@ -58,3 +58,37 @@ def test_device_guard_refuses_wrong_shapes(runtime):
         guard.disagreement(planes, planes, runtime.to_device(np.zeros((9, 9), np.float32)), 0.0, 0.0)
     with pytest.raises(ValueError, match="not a whole number"):
         LensGuard(runtime, (10, 18), (9, 9))
+
+
+def test_lens_mean_guard_soft_thresholds_each_colour_mean_towards_malvar():
+    mosaic = np.full((9, 18), 0.25)  # 1x2 lenses of 9x9; sd of a lens mean = sqrt(var / 20.25)
+    gain, floor, k = 0.0016, 0.0, 3.0
+    limit = k * np.sqrt(gain * 0.25 / 20.25)
+    rng = np.random.default_rng(5)
+    m = rng.random((3, 9, 18))
+    x = m + 0.01 * rng.standard_normal((3, 9, 18))  # texture of x kept, only its lens means move
+    x[:, :, :9] -= x[:, :, :9].mean(axis=(1, 2), keepdims=True) - m[:, :, :9].mean(axis=(1, 2), keepdims=True)
+    x[0, :, :9] += 0.5 * limit  # lens 0, red: within the limit -> Malvar's mean
+    x[1, :, 9:] -= x[1, :, 9:].mean() - m[1, :, 9:].mean() - 3 * limit  # lens 1, green: 3 limits off -> 2 left
+    out, replaced = guard_lens_means_np(x, m, mosaic, (9, 9), gain=gain, floor=floor, k=k)
+    means = lambda a: a.reshape(3, 9, 2, 9).mean(axis=(1, 3))  # noqa: E731
+    np.testing.assert_allclose(means(out)[0, 0], means(m)[0, 0], atol=1e-12)
+    np.testing.assert_allclose(means(out)[1, 1] - means(m)[1, 1], 2 * limit, rtol=1e-9)
+    spread = lambda a: a - np.repeat(np.repeat(means(a), 9, axis=1)[:, None], 9, axis=1)  # noqa: E731
+    np.testing.assert_allclose(spread(out), spread(x), atol=1e-12)  # the texture inside each lens is x's
+    assert replaced.tolist() == [[3.0, 2.0]]
+
+
+@pytest.mark.parametrize("pitch, lenses", [((9, 9), (5, 7)), ((5, 7), (3, 4)), ((1, 1), (4, 6))])
+def test_device_lens_mean_guard_matches_the_reference(runtime, rng, pitch, lenses):
+    H, W = lenses[0] * pitch[0], lenses[1] * pitch[1]
+    mosaic = rng.random((H, W)).astype(np.float32) - 0.05
+    m = rng.random((3, H, W)).astype(np.float32)
+    x = (m + 0.05 * rng.standard_normal((3, H, W))).astype(np.float32)
+    guard = LensGuard(runtime, (H, W), pitch)
+    x_dev = runtime.to_device(x)
+    replaced = guard.guard_means(x_dev, runtime.to_device(m), runtime.to_device(mosaic), 2e-3, 1e-4, 2.0)
+    expected, expected_replaced = guard_lens_means_np(x, m, mosaic, pitch, gain=2e-3, floor=1e-4, k=2.0)
+    np.testing.assert_allclose(x_dev.get(), expected, atol=2e-6)
+    np.testing.assert_array_equal(replaced, expected_replaced)
+    assert 0 < expected_replaced.sum() < 3 * lenses[0] * lenses[1]  # both kinds of lens occur

@@ -10,7 +10,7 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from lfcl.bench.fit_linear4d import (
+from fit_linear4d import (  # research/, on sys.path through conftest.py
     DEFAULT_LAYOUT,
     DEFAULT_LUX,
     NormalEquations,
@@ -329,8 +329,10 @@ def test_shipped_model_loads_and_is_finite():
     assert model.coefficients.shape[1:5] == (9, 9, len(CLASSES), 3)
     assert np.all(np.diff(model.relative_noise) > 0)
     assert len(meta["lux"]) == len(model.relative_noise)
-    # made by the documented command with its defaults
-    assert meta["command"] == "python -m lfcl.bench.fit_linear4d -o lfcl/data/linear4d.npz"
+    # made by the documented command with its defaults (the script was lfcl/bench/fit_linear4d.py when the
+    # shipped file was fitted; it moved to research/ unchanged)
+    assert meta["command"] in ("python -m lfcl.bench.fit_linear4d -o lfcl/data/linear4d.npz",
+                               "python research/fit_linear4d.py -o lfcl/data/linear4d.npz")
     defaults = inspect.signature(fit).parameters
     seeds = list(range(defaults["seed_base"].default, defaults["seed_base"].default + defaults["scenes"].default))
     assert meta["training_scenes"]["seeds"] == seeds
@@ -364,7 +366,7 @@ def test_shipped_model_keeps_a_flat_colour_field_on_the_device(runtime, pattern)
 
 def test_shipped_model_beats_malvar_on_a_held_out_training_scene():
     """A scene of the training generator that no set saw (seed 99): linear4d beats Malvar's PSNR."""
-    from lfcl.bench.training_scenes import training_planes
+    from training_scenes import training_planes
     from lfcl.layout import exchange_to_planes
     from lfcl.ops.malvar import malvar_np
     from lfcl.sim import render_planes, simulate
@@ -422,7 +424,7 @@ def test_demosaic_lightfield_runs_linear4d(runtime):
     capture = simulate("charts", lenses=(4, 4), lux=12.0, seed=0)
     mosaic = capture.normalised_raw()
     noise = NoiseEstimate(gain=1e-4, floor=1e-6, sigma=0.005, source="test")
-    result = demosaic_lightfield(mosaic, capture.pattern, (9, 9), "linear4d", noise=noise)
+    result = demosaic_lightfield(mosaic, capture.pattern, (9, 9), "linear4d", noise=noise, safety_net=False)
     assert result.method == "linear4d" and result.iterations == 0 and result.noise is noise
     np.testing.assert_array_equal(result.planes, linear4d(runtime, mosaic, capture.pattern, (9, 9), noise=noise))
     estimated = demosaic_lightfield(mosaic, capture.pattern, (9, 9), "linear4d")  # noise from the raw

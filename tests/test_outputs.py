@@ -128,7 +128,8 @@ def run(*args):
 def test_every_output_kind_end_to_end(capture, tmp_path):
     out = tmp_path / "out"
     result = run(capture / "raw.dng", "--method", "admm-uv", "--iterations", "3", "-o", out,
-                 "--outputs", "center,mean,views,views-each,refocus,lightfield", "--refocus", "-1:1:0.5", "--json")
+                 "--outputs", "center,mean,views,views-each,refocus,lightfield,depth", "--refocus", "-1:1:0.5",
+                 "--json")
     assert result.exit_code == 0, result.output
     summary = json.loads(result.output)
     assert summary == json.loads((out / "summary.json").read_text())
@@ -142,7 +143,7 @@ def test_every_output_kind_end_to_end(capture, tmp_path):
     lf = np.load(out / "lightfield.npy")
     assert lf.shape == (S, T, U, V, 3) and lf.dtype == np.float32
     names = sorted(p.name for p in out.iterdir())
-    expected = {"summary.json", "lightfield.npy"}
+    expected = {"summary.json", "lightfield.npy", "depth.exr", "depth_confidence.exr", "depth.png"}
     for stem in ["center", "mean", "views"] + [f"view_{u:02d}_{v:02d}" for u in range(U) for v in range(V)] + [
             "refocus_-1", "refocus_-0.5", "refocus_+0", "refocus_+0.5", "refocus_+1"]:
         expected |= {stem + ".exr", stem + ".png"}
@@ -186,7 +187,8 @@ def test_preview_is_the_srgb_encoding_of_the_scaled_centre_view(capture, tmp_pat
     png = read_image(out / "center.png")
     assert np.max(np.abs(png - expected)) <= 1 / 255 + 1e-3
     assert sorted(p.name for p in out.iterdir()) == ["center.exr", "center.png", "summary.json"]
-    assert {s["output"] for s in summary["skipped"]} == {"mean", "views", "views-each", "refocus", "lightfield"}
+    assert {s["output"] for s in summary["skipped"]} == {"mean", "views", "views-each", "refocus", "lightfield",
+                                                         "depth"}
 
 
 def test_tiff_and_no_previews(capture, tmp_path):

@@ -192,17 +192,26 @@ def test_auto_names_and_runs_its_choice(grid, processed):
     assert (out / "lightfield.npy").read_bytes() == (chosen / "lightfield.npy").read_bytes()
 
 
-def _rule(candidate, losses):
-    """A one-band auto rule over every sigma (the shape of lfcl/data/auto_rule.json)."""
-    return ({"sigma_from": 0.0, "sigma_to": 1.0, "candidate": candidate, "within_db": 0.1, "captures": 4,
-             "worst_loss_db": losses[candidate], "losses_db": losses,
-             "median_seconds": {name: 0.01 if name == "malvar" else 0.2 for name in losses}},)
+def _rule(candidate, worst, median=None):
+    """A one-band auto rule over every sigma (the shape of lfcl/data/auto_rule.json): worst-case and median
+    gains over Malvar per candidate."""
+    median = median or worst
+    return ({"sigma_from": 0.0, "sigma_to": 1.0, "candidate": candidate, "tie_db": 0.1, "captures": 4,
+             "worst_gain_db": worst[candidate], "median_gain_db": median[candidate], "worst_gains_db": worst,
+             "median_gains_db": median, "median_seconds": {name: 0.01 if name == "malvar" else 0.2 for name in worst}},)
 
 
-def test_auto_lists_what_it_skipped_for_a_cheaper_method(captures, monkeypatch, tmp_path):
+def _rules(both, **views):
+    """A rule file's contents (lfcl.auto.load_rules) holding ``both`` for every view but those given."""
+    return {"rules": {"both": both, "center": views.get("center", both), "mean": views.get("mean", both)}}
+
+
+def test_auto_lists_what_it_skipped_for_a_safer_method(captures, monkeypatch, tmp_path):
     import lfcl.auto
 
-    monkeypatch.setattr(lfcl.auto, "load_rules", lambda: {"rule": _rule("malvar", {"malvar": 0.05, "admm-uv@1": 0.0})})
+    # admm-uv gains more in the middle but loses 0.5 dB to Malvar somewhere: Malvar is the pick
+    monkeypatch.setattr(lfcl.auto, "load_rules", lambda: _rules(_rule("malvar", {"malvar": 0.0, "admm-uv@1": -0.5},
+                                                                      {"malvar": 0.0, "admm-uv@1": 1.5})))
     out = tmp_path / "out"
     result = invoke("process", captures / "rotated" / "raw.dng", "--calibration", captures / "rotated" / "cal.json",
                     "--method", "auto", "-o", out, "--outputs", "lightfield", "--no-previews")
@@ -211,8 +220,9 @@ def test_auto_lists_what_it_skipped_for_a_cheaper_method(captures, monkeypatch, 
     assert summary["parameters"]["auto"]["method"] == "malvar" and summary["iterations"] == 0
     skipped = [s for s in summary["skipped"] if s.get("stage") == "demosaic"]
     assert [s["output"] for s in skipped] == ["admm-uv@1"]
-    assert "auto chose the cheaper malvar" in skipped[0]["reason"] and "0.05 dB against 0.00 dB" in skipped[0]["reason"]
-    assert "skipped:" in result.output and "admm-uv@1 (auto chose the cheaper malvar" in result.output
+    assert "auto chose malvar: worst-case gain over Malvar +0.00 dB against -0.50 dB" in skipped[0]["reason"]
+    assert "median +0.00 dB against +1.50 dB" in skipped[0]["reason"]
+    assert "skipped:" in result.output and "admm-uv@1 (auto chose malvar" in result.output
 
 
 @pytest.mark.parametrize("candidate, replaced", [
@@ -223,8 +233,7 @@ def test_auto_on_a_resampled_grid_replaces_a_method_it_cannot_run(captures, monk
                                                                   replaced):
     import lfcl.auto
 
-    monkeypatch.setattr(lfcl.auto, "load_rules",
-                        lambda: {"rule": _rule(candidate, {candidate: 0.0, "admm-uv@1": 0.2})})
+    monkeypatch.setattr(lfcl.auto, "load_rules", lambda: _rules(_rule(candidate, {candidate: 0.0, "admm-uv@1": -0.2})))
     out = tmp_path / "out"
     result = invoke("process", captures / "hex" / "raw.dng", "--calibration", captures / "hex" / "cal.json",
                     "--method", "auto", "-o", out, "--outputs", "lightfield", "--no-previews", "--json")
@@ -302,10 +311,10 @@ def test_auto_takes_the_rule_judged_on_the_outputs_asked_for(captures, monkeypat
                                                              method):
     import lfcl.auto
 
-    rules = {"center": _rule("malvar", {"malvar": 0.0, "admm-uv@1": 0.3}),
-             "mean": _rule("admm-uv@1", {"malvar": 0.4, "admm-uv@1": 0.0}),
-             "both": _rule("admm-st@1", {"malvar": 0.4, "admm-uv@1": 0.3, "admm-st@1": 0.2})}
-    monkeypatch.setattr(lfcl.auto, "load_rules", lambda: {"rule": rules["both"], "rules_by_view": rules})
+    rules = _rules(_rule("admm-st@1", {"malvar": 0.0, "admm-uv@1": -0.3, "admm-st@1": 0.2}),
+                   center=_rule("malvar", {"malvar": 0.0, "admm-uv@1": -0.3}),
+                   mean=_rule("admm-uv@1", {"malvar": 0.0, "admm-uv@1": 0.4}))
+    monkeypatch.setattr(lfcl.auto, "load_rules", lambda: rules)
     out = tmp_path / "out"
     result = invoke("process", captures / grid / "raw.dng", "--calibration", captures / grid / "cal.json",
                     "--method", "auto", "-o", out,

@@ -402,7 +402,7 @@ def test_cli_end_to_end(tmp_path, cli):
                                       "--seed", "0", "-o", str(out)])
     assert result.exit_code == 0, result.output
     assert sorted(p.name for p in out.iterdir()) == sorted(
-        ["raw.dng", "white.dng", "meta.json", "truth.npy", "truth_views.exr"])
+        ["raw.dng", "white.dng", "meta.json", "truth.npy", "truth_views.exr", "disparity.npy"])
     meta = json.loads((out / "meta.json").read_text())
     assert meta["lenses"] == [16, 16] and meta["pitch"] == [9, 9] and meta["grid"] == "aligned-square"
     assert meta["pattern"] == "GRBG" and meta["lux"] == 12.0 and meta["seed"] == 0

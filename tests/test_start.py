@@ -34,7 +34,7 @@ def test_linear4d_start_is_admm_from_the_linear4d_planes(runtime, textured_mosai
     """With a fixed budget, start="linear4d" is the float64 reference ADMM run from linear4d's output."""
     b = textured_mosaic
     got = demosaic_lightfield(b, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=6, start="linear4d",
-                              skip_flat=False)  # every lens solved, as the reference does
+                              safety_net=False)  # every lens solved, no net: as the reference does
     x0 = linear4d(runtime, b, "GRBG", (9, 9), (0, 0), NOISE).astype(np.float64)
     # the device's x-update is the exact per-lens solve: the reference gets CG run to convergence
     reference_params = dataclasses.replace(
@@ -53,7 +53,7 @@ def test_lens_malvar_start_is_admm_from_the_lens_bounded_malvar_planes(textured_
     """start="lens-malvar" is the float64 reference ADMM run from Malvar bounded to each lens."""
     b = textured_mosaic
     got = demosaic_lightfield(b, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=6, start="lens-malvar",
-                              skip_flat=False)
+                              safety_net=False)
     reference_params = dataclasses.replace(
         AdmmParams(**{k: got.parameters[k] for k in AdmmParams.__dataclass_fields__}), cg_steps=200, cg_tol=1e-12)
     x0 = malvar_np(b, "GRBG", lens=(9, 9)).astype(np.float64)
@@ -86,7 +86,7 @@ def test_guarded_start_is_admm_from_linear4d_with_malvar_in_the_outlier_lenses(r
     b = textured_mosaic.copy()
     b[9:18, 18:27] = 1.0  # a clipped highlight filling one lens: a sharp lens-to-lens break
     got = demosaic_lightfield(b, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=6, start="guarded",
-                              skip_flat=False)
+                              safety_net=False)
     linear = linear4d(runtime, b, "GRBG", (9, 9), (0, 0), NOISE).astype(np.float64)
     malvar = malvar_np(b, "GRBG").astype(np.float64)
     chosen = malvar_lenses(lens_disagreement_np(linear, malvar, b, (9, 9), gain=NOISE.gain, floor=NOISE.floor))

@@ -273,7 +273,7 @@ def test_exact_lens_solve_agrees_with_cg_when_a_lens_lacks_a_colour(runtime, pit
 # --------------------------------------------------------------------------- float32 device vs float64 reference
 
 
-@pytest.mark.parametrize("method", ADMM_METHODS)
+@pytest.mark.parametrize("method", stress.GRID_METHODS)
 def test_device_agrees_with_float64_reference_across_the_grid(method):
     # admm_params(method, sigma, lam=, rho=, iterations=20) with x_update="cg" on both, same
     # Malvar start, charts at 0.05 lux on 3x4 lenses; tolerances: stress.x_tolerance (1e-5

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import click
 
+from ..method_names import DEFAULT_METHOD
 from . import device_option, user_errors
 
 
@@ -177,3 +178,35 @@ def stress_command(lenses, only, with_reference, as_json, device):
     if failures:
         click.echo(f"lfcl: stress: {failures} row(s) break the contract", err=True)
         sys.exit(1)
+
+
+@command.command("matrix")
+@click.option("--scenes", default=None, metavar="NAME,...",
+              help="Built-in scenes to simulate; default: every built-in scene (lfcl.sim.SCENES).")
+@click.option("--shared", default="../shared", show_default=True, type=click.Path(path_type=Path),
+              help="The workplace's shared folder: its real light fields (antinous, Lytro 2067) join the matrix "
+                   "where present.")
+@click.option("--lux", "lux_text", default="0.5,1,2,4,12,50", show_default=True, metavar="LUX,...")
+@click.option("--methods", default=f"{DEFAULT_METHOD},auto", show_default=True, metavar="METHOD,...",
+              help="Methods compared with Malvar (default: `lfcl process`'s default method and auto).")
+@click.option("--lenses", type=click.IntRange(min=4), default=48, show_default=True,
+              help="Lenses per side of every capture (real light fields: a centre crop).")
+@click.option("--seed", type=click.IntRange(min=0), default=7, show_default=True,
+              help="Scene and noise seed (the defaults were fitted on seeds 1 and 2).")
+@click.option("--json", "as_json", is_flag=True, help="Print the rows as JSON instead of a table.")
+@device_option
+@user_errors
+def matrix_command(scenes, shared, lux_text, methods, lenses, seed, as_json, device):
+    """Every scene and real light field x light level x method: PSNR against Malvar, the worst cell first."""
+    from ..bench import matrix
+    from ..evaluate import check_methods
+    from ..sim.scenes import SCENES, check_scene
+
+    scene_list = [check_scene(s.strip()) for s in scenes.split(",") if s.strip()] if scenes else list(SCENES)
+    method_list = check_methods([m.strip() for m in methods.split(",") if m.strip()])
+    lux = matrix.parse_lux(lux_text)
+    progress = None if as_json else (lambda r: click.echo(
+        f"  {r['capture']} {r['lux']:g} lux {r['method']}: {r['centre_gain']:+.2f} / {r['mean_gain']:+.2f} dB", err=True))
+    rows = matrix.run(scene_list, matrix.real_lightfields(shared), lux, method_list, lenses=lenses, seed=seed,
+                      device=device, progress=progress)
+    click.echo(json.dumps(rows, indent=2) if as_json else matrix.format_rows(rows))

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import click
 
-from ..method_names import FLAT_P, METHODS, STARTS
+from ..method_names import DEFAULT_METHOD, FLAT_P, METHODS, STARTS
 from . import device_option, user_errors
 
 DEFAULT_OUTPUTS = "center,mean,lightfield"
@@ -26,14 +26,14 @@ DEFAULT_REFOCUS = "-1:1:0.25"
 DEFAULT_PITCH = 9
 
 #: The output kinds (lfcl.outputs.KINDS, repeated here so that `lfcl --help` does not import numpy).
-OUTPUTS = ("center", "mean", "views", "views-each", "refocus", "lightfield")
+OUTPUTS = ("center", "mean", "views", "views-each", "refocus", "lightfield", "depth")
 
 #: Options a ``--pipeline`` recipe supplies when not given (parameter name -> recipe key).
 RECIPE_KEYS = {"method": "method", "strength": "strength", "lam": "lambda", "iterations": "iterations",
                "outputs": "outputs", "refocus_spec": "refocus", "fmt": "format", "previews": "previews"}
 
 _OPTIONS = (
-    click.option("--method", default="admm-uv", show_default=True,
+    click.option("--method", default=DEFAULT_METHOD, show_default=True,
                  type=click.Choice(METHODS),
                  help="Demosaic/denoise method. auto: chosen from the raw's noise level, judged on --outputs "
                       "(center alone: the centre view; mean/refocus alone: the mean image; else both; docs/auto.md)."),
@@ -53,8 +53,10 @@ _OPTIONS = (
     click.option("--refocus", "refocus_spec", default=None, metavar="START:STOP:STEP|A,B,..",
                  help=f"Refocus slopes (lenses per view step): a range, stop included when on the grid, or a "
                       f"comma list. Implies the refocus output; refocus without it uses {DEFAULT_REFOCUS}."),
-    click.option("--format", "fmt", default="exr", show_default=True, type=click.Choice(["exr", "tiff"]),
-                 help="Images: EXR (float, scene-linear) or TIFF (16-bit linear, clipped to [0, 1])."),
+    click.option("--format", "fmt", default="exr", show_default=True, type=click.Choice(["exr", "tiff", "dng"]),
+                 help="Images: EXR (float, scene-linear), TIFF (16-bit linear, clipped to [0, 1]) or DNG "
+                      "(LinearRaw for raw editors, with the raw's colour matrix and white balance; "
+                      "docs/darktable.md)."),
     click.option("--previews/--no-previews", default=True, show_default=True,
                  help="Also write an 8-bit sRGB PNG of every image (white balance and colour matrix from the raw)."),
     click.option("--lambda", "lam", default=None, type=float,
@@ -75,7 +77,10 @@ _OPTIONS = (
     click.option("--skip-flat/--solve-flat", "skip_flat", default=None,
                  help="Flat lenses (constant per colour within the noise: a chi-square test against the raw's "
                       "noise model) get their colour means and leave the ADMM solve (admm-uv, admm-uv-xc, auto's "
-                      "picks; docs/auto.md). Default: skip, for those methods."),
+                      "picks; docs/auto.md). Default: solve every lens (the test took fine texture for noise)."),
+    click.option("--safety-net/--no-safety-net", "safety_net", default=True, show_default=True,
+                 help="Keep every lens's colour means within the noise of Malvar's (lfcl/safety_net.py; "
+                      "docs/auto.md): never a mean image worse than Malvar's."),
     click.option("--flat-p", "flat_p", default=None, type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
                  metavar="P",
                  help=f"A lens is flat when its chi-square p-value is above P (default {FLAT_P:g}); implies --skip-flat."),
@@ -112,7 +117,7 @@ class ProcessSettings:
     ``--pipeline`` recipe (name, path, options, from_command_line) or None.
     """
 
-    method: str = "admm-uv"
+    method: str = DEFAULT_METHOD
     pitch: int | None = None
     calibration: str | None = None
     white: str | None = None
@@ -130,6 +135,7 @@ class ProcessSettings:
     tolerance_db: float | None = None
     start: str | None = None
     skip_flat: bool | float | None = None
+    safety_net: bool = True
 
     def pipeline(self, callback=None):
         """The :class:`lfcl.stages.Pipeline` of these settings; ``callback``: per ADMM iteration (progress)."""
@@ -146,7 +152,7 @@ class ProcessSettings:
             Demosaic(self.method, lam=self.lam, iterations=self.iterations, strength=self.strength,
                      device=self.device, callback=callback, max_memory=self.max_memory,
                      tolerance_db=self.tolerance_db, start=self.start, skip_flat=self.skip_flat,
-                     auto_view=view_for_outputs(self.outputs)),  # auto judges its choice on what is written
+                     safety_net=self.safety_net, auto_view=view_for_outputs(self.outputs)),  # auto judges its choice on what is written
             Outputs(list(self.outputs), refocus=self.refocus or DEFAULT_REFOCUS, fmt=self.fmt,
                     previews=self.previews, metadata=extra),
         ])
@@ -227,7 +233,7 @@ def settings_from_options(options: dict, ctx: click.Context | None = None) -> Pr
         strength=float(strength), max_memory=None if max_memory is None else int(max_memory * 2**30),
         device=options["device"], recipe=recipe_meta,
         tolerance_db=None if tolerance_db is None else float(tolerance_db), start=options.get("start"),
-        skip_flat=skip_flat)
+        skip_flat=skip_flat, safety_net=bool(options.get("safety_net", True)))
     settings.pipeline()  # the stages check the rest (--strength, --lambda, ...), still before any work
     return settings
 
@@ -369,6 +375,14 @@ def summary_text(raw, out_dir, summary: dict) -> str:
         method = f"auto -> {auto['method']}{strength}{start} ({auto['reason']})\n  ran {auto['method']}"
         start = ""
     lines.append(f"method {method}{start}: {summary['iterations']} iterations ({summary['stop_reason']}){lam}{stop}")
+    net = params.get("safety_net")
+    if net and not net["lenses"]:
+        lines.append(f"safety net: {net['why']}")
+    elif net:
+        lines.append(f"safety net: {net['lenses_from_malvar']} of {net['lenses']} lenses took Malvar's colour means "
+                     f"(they agreed within the noise), {net['lenses_kept']} kept their own moved {net['k']:g} noise "
+                     f"sds towards Malvar's, the rest some of each ({net['colour_means_from_malvar']} of "
+                     f"{3 * net['lenses']} colour means from Malvar)")
     secs = summary["seconds"]
     lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in secs.items()))
     per = summary.get("output_seconds", {})

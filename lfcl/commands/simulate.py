@@ -12,7 +12,8 @@ from . import user_errors
 
 @click.command("simulate")
 @click.option("--scene", default="charts", show_default=True, metavar="NAME",
-              help="Built-in scene: charts (three resolution charts at different depths) or deadleaves.")
+              help="Built-in scene: charts (three resolution charts at different depths), deadleaves or "
+                   "finetexture (lens-scale grain, thin wedges and fine text off the focal plane).")
 @click.option("--texture", type=click.Path(path_type=Path, readable=False), default=None, metavar="IMAGE",
               help="Image mapped onto the scene's planes instead of their textures (8/16-bit: sRGB, decoded to linear; "
                    "a camera raw: developed linear by LibRaw).")
@@ -25,7 +26,7 @@ from . import user_errors
               help="Pixels per microlens: an integer for the aligned grid (U = V); any value >= 2 with --grid.")
 @click.option("--pattern", default="GRBG", show_default=True, help="Bayer pattern: RGGB, GRBG, GBRG or BGGR.")
 @click.option("--lux", type=float, default=12.0, show_default=True, help="Mean illuminance at the sensor, lux.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (noise, dead leaves).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed (noise, dead leaves, fine texture).")
 @click.option("--exposure", default="1/90", show_default=True, metavar="SECONDS", help="Exposure time, s.")
 @click.option("--vignetting/--no-vignetting", default=False, show_default=True,
               help="Microlens cos^4 falloff in raw and white images (never in the truth).")
@@ -43,7 +44,8 @@ from . import user_errors
 @click.option("--white-only", is_flag=True,
               help="With --grid: write only white.dng and meta.json (for calibration).")
 @click.option("-o", "--output", "output", required=True, type=click.Path(file_okay=False, path_type=Path),
-              metavar="DIR", help="Output folder: raw.dng, white.dng, meta.json, truth.npy, truth_views.exr.")
+              metavar="DIR", help="Output folder: raw.dng, white.dng, meta.json, truth.npy, truth_views.exr "
+                                   "(a scene on the aligned grid: also disparity.npy).")
 @user_errors
 def command(scene, texture, lightfield, lenses, pitch, pattern, lux, seed, exposure, vignetting, grid, pitch_px,
             rotation, offset, views, white_only, output):

@@ -50,6 +50,29 @@ def take_lenses_np(x: np.ndarray, source: np.ndarray, chosen: np.ndarray, pitch)
     return np.where(per_pixel, source, x)
 
 
+def guard_lens_means_np(x: np.ndarray, malvar: np.ndarray, mosaic: np.ndarray, pitch, *, gain: float,
+                        floor: float, k: float) -> tuple[np.ndarray, np.ndarray]:
+    """The safety net's lens-mean guard (kernels/lensguard.cl ``guard_lens_means``), float64.
+
+    Returns (x with each lens's colour means soft-thresholded towards Malvar's at ``k`` sd, sd the
+    noise of a mean of a quarter of the lens's samples at its level; the number of colours [S, T]
+    moved all the way to Malvar's mean).
+    """
+    U, V = pitch
+    H, W = mosaic.shape
+    if H % U or W % V:
+        raise ValueError(f"mosaic {H}x{W} is not a whole number of {U}x{V} lenses")
+    S, T = H // U, W // V
+    x5 = np.asarray(x, np.float64).reshape(3, S, U, T, V)
+    m5 = np.asarray(malvar, np.float64).reshape(3, S, U, T, V)
+    level = np.clip(np.asarray(mosaic, np.float64).reshape(S, U, T, V).mean(axis=(1, 3)), 0.0, None)
+    limit = k * np.sqrt(np.maximum(gain * level + floor, VARIANCE_FLOOR) / (0.25 * U * V))
+    dx = (x5 - m5).mean(axis=(2, 4))  # [3, S, T]
+    kept = np.sign(dx) * np.maximum(np.abs(dx) - limit, 0.0)
+    out = x5 + (kept - dx)[:, :, None, :, None]
+    return out.reshape(np.shape(x)), (np.abs(dx) <= limit).sum(axis=0).astype(np.float64)
+
+
 class LensGuard:
     """The two references on the device, for [3, H, W] float32 starts of an H x W mosaic."""
 
@@ -68,6 +91,18 @@ class LensGuard:
         self.runtime.launch("lensguard", "lens_disagreement", (T, S), a.data, b.data, mosaic.data, self._out.data,
                             np.int32(self.height), np.int32(self.width), np.float32(gain), np.float32(floor),
                             defines=grid_defines(self.pitch, 0))
+        return self._out.get().astype(np.float64)
+
+    def guard_means(self, x, malvar, mosaic, gain: float, floor: float, k: float) -> np.ndarray:
+        """:func:`guard_lens_means_np` in place on the device ``x``; the [S, T] replaced-colour counts."""
+        planes = (3, self.height, self.width)
+        check_device_array(x, planes, "x")
+        check_device_array(malvar, planes, "malvar")
+        check_device_array(mosaic, (self.height, self.width), "mosaic")
+        S, T = self.lenses
+        self.runtime.launch("lensguard", "guard_lens_means", (T, S), x.data, malvar.data, mosaic.data,
+                            self._out.data, np.int32(self.height), np.int32(self.width), np.float32(gain),
+                            np.float32(floor), np.float32(k), defines=grid_defines(self.pitch, 0))
         return self._out.get().astype(np.float64)
 
     def take(self, x, source, chosen: np.ndarray):

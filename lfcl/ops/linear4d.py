@@ -9,7 +9,7 @@ of the same lens; cross-lens taps see the same or a nearby ``(u, v)`` under a
 neighbouring lens. With an odd pitch (9) the neighbouring lens's pixel at the same
 ``(u, v)`` has the opposite Bayer parity, so it measured another colour. The
 coefficients were fitted by least squares on simulated ground truth
-(``python -m lfcl.bench.fit_linear4d``, docs/linear4d.md) and depend on
+(``python research/fit_linear4d.py``, docs/linear4d.md) and depend on
 
 * the pixel's position ``(u, v)`` under its lens, and
 * its CFA class (:data:`CLASSES`: R; G with R left and right; G with B left and
@@ -390,7 +390,7 @@ def linear4d_operator(runtime, mosaic, pattern: str, pitch, origin=(0, 0), noise
     pitch = tuple(int(p) for p in pitch)
     if pitch != tuple(model.pitch):
         raise ValueError(f"the linear4d coefficients were fitted for {model.pitch[0]}x{model.pitch[1]} lenses, "
-                         f"not {pitch[0]}x{pitch[1]}: refit with python -m lfcl.bench.fit_linear4d --pitch")
+                         f"not {pitch[0]}x{pitch[1]}: refit with python research/fit_linear4d.py --pitch")
     mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
     if mosaic.ndim != 2:
         raise ValueError(f"mosaic must be 2D [H, W], got shape {mosaic.shape}")

@@ -178,5 +178,24 @@ def malvar(mosaic, pattern: str, origin=(0, 0), device=None) -> np.ndarray:
     array = _validate_mosaic(mosaic)
     runtime = get_runtime(device)
     op = Malvar(runtime, array.shape, pattern, origin)
-    planes = op.forward(runtime.to_device(array)).get()
-    return np.ascontiguousarray(planes.transpose(1, 2, 0))
+    import pyopencl as cl
+
+    if not runtime.device.type & cl.device_type.CPU:
+        planes = op.forward(runtime.to_device(array)).get()
+        return np.ascontiguousarray(planes.transpose(1, 2, 0))
+    # A CPU device reads and writes host memory: buffers over the numpy arrays, no copies in or out
+    # (3000x3000 on PoCL: 216 -> ~120 ms through this call, the upload and download were ~45% of it).
+    import pyopencl.array as cla
+
+    flags = cl.mem_flags
+    planes = np.empty(op.planes_shape, np.float32)
+    source = cla.Array(runtime.queue, array.shape, np.float32,
+                       data=cl.Buffer(runtime.context, flags.READ_ONLY | flags.USE_HOST_PTR, hostbuf=array))
+    target = cla.Array(runtime.queue, planes.shape, np.float32,
+                       data=cl.Buffer(runtime.context, flags.WRITE_ONLY | flags.USE_HOST_PTR, hostbuf=planes))
+    op.forward(source, out=target)
+    mapped, _ = cl.enqueue_map_buffer(runtime.queue, target.data, cl.map_flags.READ, 0, planes.shape, np.float32)
+    try:  # the map waits for the kernel and makes its writes visible on the host
+        return np.ascontiguousarray(mapped.transpose(1, 2, 0))
+    finally:
+        mapped.base.release(runtime.queue)

@@ -9,6 +9,7 @@ CFA-sampled through a microlens geometry and exposed by a noisy sensor model
 * :mod:`~lfcl.sim.planes`     planes renderer (disparity, occlusion, sub-sampling)
 * :mod:`~lfcl.sim.charts`     the ``charts`` scene (resolution charts)
 * :mod:`~lfcl.sim.deadleaves` the ``deadleaves`` scene
+* :mod:`~lfcl.sim.finetexture` the ``finetexture`` scene (lens-scale detail off the focal plane)
 * :mod:`~lfcl.sim.texture`    images as linear RGB and as plane textures
 * :mod:`~lfcl.sim.scenes`     scene registry, :func:`render_scene`
 * :mod:`~lfcl.sim.lightfield` loading HCI folders and ``.npy`` light fields

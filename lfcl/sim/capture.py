@@ -13,8 +13,10 @@ vignetting, in the pipeline's normalised raw scale ``(raw - black) / (white -
 black)``, i.e. expected electrons / full-well electrons, clipped at 1.0.
 
 :func:`write_capture` writes ``raw.dng``, ``white.dng``, ``meta.json``,
-``truth.npy`` and ``truth_views.exr`` into a temporary sibling folder and moves
-them into place only once all were written.
+``truth.npy`` and ``truth_views.exr`` (and, for a scene of planes on the aligned
+grid, ``disparity.npy``: the true centre-view disparity ``[S, T]``,
+:func:`lfcl.sim.scenes.planes_disparity`) into a temporary sibling folder and
+moves them into place only once all were written.
 
 :func:`simulate_white` / :func:`write_white_capture`: only ``white.dng`` and
 ``meta.json`` of a square or hexagonal grid of any pitch, rotation and offset
@@ -40,12 +42,13 @@ from .dng import write_dng
 from .geometry import GridGeometry, LensletGeometry
 from .lightfield import load_lightfield
 from .planes import Plane, render_planes
-from .scenes import check_scene, scene_planes
+from .scenes import check_scene, planes_disparity, scene_planes
 from .sensor import SensorModel
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float64)  # Rec. 709 / sRGB Y weights
 WHITE_FRACTION = 0.8
 FILES = ("raw.dng", "white.dng", "meta.json", "truth.npy", "truth_views.exr")
+DISPARITY_FILE = "disparity.npy"
 WHITE_FILES = ("white.dng", "meta.json")
 
 
@@ -72,6 +75,7 @@ class Capture(_SensorLevels):
     geometry: LensletGeometry
     sensor: SensorModel
     pattern: str
+    disparity: np.ndarray | None = None  # float32 [S, T] true centre-view disparity (planes only), lenses/view step
 
     def normalised_raw(self) -> np.ndarray:
         """``(raw - black) / (white - black)`` as float32."""
@@ -176,7 +180,7 @@ def simulate(scene: str = "charts", lenses=None, pitch: int | None = None, patte
         if pitch is not None and (int(pitch) != U or int(pitch) != V):
             raise ValueError(f"--pitch {pitch} does not match the light field's {U}x{V} views")
         geometry = LensletGeometry(radiance.shape[:2], (U, V))
-        plane_meta = None
+        plane_meta = disparity = None
     else:
         pitch = _check_pitch(9 if pitch is None else pitch)
         lenses = lenses if lenses is not None else (64, 64)
@@ -189,6 +193,7 @@ def simulate(scene: str = "charts", lenses=None, pitch: int | None = None, patte
             source = {"kind": "planes", "name": "custom"}
         radiance = render_planes(planes, lenses, (pitch, pitch), supersample=supersample, progress=progress)
         plane_meta = [p.as_meta() for p in planes]
+        disparity = planes_disparity(planes, lenses)
 
     luminance = radiance.reshape(-1, 3) @ LUMINANCE.astype(np.float32)
     mean_y, peak_y = float(luminance.mean(dtype=np.float64)), float(luminance.max())
@@ -243,7 +248,14 @@ def simulate(scene: str = "charts", lenses=None, pitch: int | None = None, patte
         "supersample": supersample,
         "files": list(FILES),
     }
-    return Capture(raw, white, truth, meta, geometry, sensor, pattern)
+    if disparity is not None:
+        meta["disparity"] = {
+            "file": DISPARITY_FILE, "shape": list(disparity.shape), "dtype": "float32",
+            "layout": "[S, T] disparity of the frontmost plane at each lens centre seen from the centre of the views",
+            "unit": "lenses per view step; a feature at row y of the centre view is at y - d (u - u0) in view u",
+        }
+        meta["files"].append(DISPARITY_FILE)
+    return Capture(raw, white, truth, meta, geometry, sensor, pattern, disparity)
 
 
 def _exposure_meta(sensor, lux, lux_per_unit, mean_y, peak_y, mean_normalised, profile) -> dict:
@@ -313,9 +325,13 @@ def write_capture(capture, directory) -> Path:
         S, T, U, V = (int(n) for n in capture.truth.shape[:4])
         write_image(tmp / "truth_views.exr", tiled_views(capture.truth),
                     {"layout": "U x V grid of S x T views", "lenses": [S, T], "pitch": [U, V]})
+        disparity = getattr(capture, "disparity", None)
+        if disparity is not None:
+            write_npy(tmp / DISPARITY_FILE, np.asarray(disparity, np.float32))
         write_json(tmp / "meta.json", capture.meta)
 
-    return _write_folder(directory, FILES, write)
+    files = FILES + ((DISPARITY_FILE,) if getattr(capture, "disparity", None) is not None else ())
+    return _write_folder(directory, files, write)
 
 
 # --------------------------------------------------------------------------- white images of any grid

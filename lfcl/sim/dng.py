@@ -30,32 +30,14 @@ as the identity (camera = sRGB).
 
 from __future__ import annotations
 
-from fractions import Fraction
-
 import numpy as np
 import tifffile
 
 from ..layout import CHANNEL_INDEX, parse_pattern
+from ..linear_dng import XYZ_TO_SRGB  # XYZ (D65) -> linear sRGB: the simulated camera's primaries
+from ..linear_dng import rationals as _rationals  # the TIFF rationals, shared with the LinearRaw writer
 
 CAMERA_MODEL = "lfcl simulated lenslet camera"
-
-# XYZ (D65) -> linear sRGB, IEC 61966-2-1 (the matrix colour-science's sRGB colourspace uses).
-XYZ_TO_SRGB = (
-    (3.2406, -1.5372, -0.4986),
-    (-0.9689, 1.8758, 0.0415),
-    (0.0557, -0.2040, 1.0570),
-)
-
-
-def _rationals(values, signed: bool, denominator: int = 10000):
-    out = []
-    for v in values:
-        f = Fraction(float(v)).limit_denominator(denominator)
-        num, den = f.numerator, f.denominator
-        if not signed and num < 0:
-            raise ValueError("unsigned rational must be >= 0")
-        out += [num, den]
-    return tuple(out)
 
 
 def dng_tags(pattern: str, black_level: int, white_level: int, noise_profile=None,

@@ -1,8 +1,10 @@
 """Built-in scenes and :func:`render_scene`.
 
 A scene is a list of :class:`lfcl.sim.planes.Plane`, front to back, built for a
-lens count (and seed). ``charts`` (:mod:`lfcl.sim.charts`) and ``deadleaves``
-(:mod:`lfcl.sim.deadleaves`) need no files. With ``texture=IMAGE`` the scene
+lens count (and seed). ``charts`` (:mod:`lfcl.sim.charts`), ``deadleaves``
+(:mod:`lfcl.sim.deadleaves`) and ``finetexture`` (:mod:`lfcl.sim.finetexture`)
+need no files. :func:`render_disparity` / :func:`planes_disparity`: the true
+centre-view disparity map of a scene. With ``texture=IMAGE`` the scene
 keeps its planes (depths, disparities, supports, occlusion) but every plane
 shows the image (:class:`lfcl.sim.texture.ImageTexture`), fitted to the plane's
 box (the background: to the frame).
@@ -18,10 +20,11 @@ import numpy as np
 
 from .charts import charts_planes
 from .deadleaves import deadleaves_planes
+from .finetexture import finetexture_planes
 from .planes import Plane, render_planes
 from .texture import ImageTexture, read_linear
 
-SCENES = ("charts", "deadleaves")
+SCENES = ("charts", "deadleaves", "finetexture")
 
 
 def check_scene(name: str) -> str:
@@ -36,6 +39,8 @@ def scene_planes(name: str, lenses, seed: int = 0, pitch=(9, 9), texture=None) -
     S, T = (int(n) for n in lenses)
     if name == "charts":
         planes = charts_planes((S, T), seed)
+    elif name == "finetexture":
+        planes = finetexture_planes((S, T), seed, pitch)
     else:
         planes = deadleaves_planes((S, T), seed, pitch)
     if texture is not None:
@@ -54,3 +59,29 @@ def render_scene(name: str, lenses=(64, 64), pitch=9, seed: int = 0, *, texture=
     U, V = (int(pitch), int(pitch)) if np.isscalar(pitch) else (int(n) for n in pitch)
     planes = scene_planes(name, lenses, seed, (U, V), texture)
     return render_planes(planes, lenses, (U, V), supersample=supersample, progress=progress)
+
+
+def planes_disparity(planes, lenses) -> np.ndarray:
+    """True centre-view disparity ``[S, T]`` float32 of ``planes`` (front to back), lenses per view step.
+
+    Lens ``(s, t)`` gets the disparity of the frontmost plane whose support covers
+    its centre ``(s + 1/2, t + 1/2)`` seen from the centre of the views
+    (``u - u0 = v - v0 = 0``); NaN where no plane does. Sign convention of
+    :mod:`lfcl.sim.planes`: a feature at row ``y`` of the centre view appears at
+    ``y - d (u - u0)`` in view ``u``.
+    """
+    S, T = (int(n) for n in lenses)
+    y, x = (a.ravel() for a in np.meshgrid(np.arange(S) + 0.5, np.arange(T) + 0.5, indexing="ij"))
+    out = np.full(S * T, np.nan, dtype=np.float32)
+    open_ = np.ones(S * T, dtype=bool)
+    for plane in planes:
+        hit = open_ & plane.covers(x, y)
+        out[hit] = plane.disparity
+        open_ &= ~hit
+    return out.reshape(S, T)
+
+
+def render_disparity(name: str, lenses=(64, 64), seed: int = 0, pitch=9) -> np.ndarray:
+    """True centre-view disparity ``[S, T]`` float32 of built-in scene ``name`` (:func:`planes_disparity`)."""
+    U, V = (int(pitch), int(pitch)) if np.isscalar(pitch) else (int(n) for n in pitch)
+    return planes_disparity(scene_planes(name, lenses, seed, (U, V)), lenses)

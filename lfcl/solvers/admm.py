@@ -42,13 +42,11 @@ Example::
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 
 import numpy as np
 import pyopencl as cl
-import pyopencl.array as cla
 import scipy.ndimage
 
 from ..device import grid_defines
@@ -171,27 +169,6 @@ def weight_runs_np(lens_weights: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(weights[:, columns].reshape(-1))
 
 
-@dataclasses.dataclass
-class OutsideSums:
-    """The history's sums over a set of lenses: what lenses solved outside a solver (frozen,
-    lfcl/solvers/freeze.py) add to its records so that they stay the whole problem's.
-
-    samples: the whole problem's sample count (the rms change is over all of them; a packed
-             problem's padding lenses, lfcl/flat_lenses.py, are not counted);
-    misfit2 = ||W^(1/2) (A x - b)||^2, prior = lam ||M D x||_1 (+ lam_xc ||M D C x||_1),
-    primal2 = ||K x - z||^2, change2 = ||x_k - x_k-1||^2, all of the iteration they froze at.
-    Their z no longer moves, so they add nothing to the dual residual; their change is kept at
-    its last value, not 0, so that the global stop rule does not fire earlier than it would
-    have (counting 0 stopped charts at 50 lux one iteration early, -0.05 dB; docs/auto.md).
-    """
-
-    samples: int
-    misfit2: float = 0.0
-    prior: float = 0.0
-    primal2: float = 0.0
-    change2: float = 0.0
-
-
 def solver_bytes(sensor_shape, dims, exact: bool, cross_channel: bool = False) -> int:
     """Device memory an AdmmSolver.solve needs, with its Malvar start and mosaic (bytes)."""
     H, W = (int(n) for n in sensor_shape)
@@ -216,15 +193,9 @@ class AdmmSolver:
     Build it once and call :meth:`solve` for each capture: the kernels and the
     work buffers are allocated here and reused.
 
-    ``buffers`` (name -> device array at least as large): memory to use instead of new
-    buffers for "z", "u", "dz", "rhs", "tmp" and, with the cross-channel block, "zc", "uc",
-    "dxc", "dzc". Freezing (lfcl/solvers/freeze.py) hands a smaller solver the memory of
-    the larger one it replaces: on a CPU device fresh memory costs a page fault per 4 KiB on
-    first write (20 ms per 50 MB measured on PoCL here, more than an iteration for a solver's
-    buffers at 160x160 lenses).
     """
 
-    def __init__(self, runtime, sensor_shape, pattern: str, pitch, dims, origin=(0, 0), buffers: dict | None = None):
+    def __init__(self, runtime, sensor_shape, pattern: str, pitch, dims, origin=(0, 0)):
         self.runtime = runtime
         self.height, self.width = (int(n) for n in sensor_shape)
         self.U, self.V = (int(p) for p in pitch)
@@ -249,36 +220,18 @@ class AdmmSolver:
         self._prior_mask = False  # K = M [D; D C]: set per solve (params.prior_mask and dark pixels)
         self._exact = False  # the x-update: exact per lens, or CG (set by prepare())
         self._row_runs = ((self.width + 15) // 16, self.height, 3)  # stencils: 16 columns a work-item
-        self._given = dict(buffers or {})
-        self._rhs, self._tmp = (self._buffer(name, self.planes_shape) for name in ("rhs", "tmp"))
+        self._rhs, self._tmp = (runtime.empty(self.planes_shape) for _ in range(2))
         self._x_prev = None  # the CG x-update's previous x (the lens solve sums its own change)
         self._cg_buffers = None  # r, P r, p, q: only the CG x-update needs them
         # D x is computed where it is used (zu_step)
-        self._z, self._u, self._dz = (self._buffer(name, self.D.gradient_shape) for name in ("z", "u", "dz"))
+        self._z, self._u, self._dz = (runtime.empty(self.D.gradient_shape) for _ in range(3))
         self._cross_buffers = None  # zc, uc, D C x, dzc: only the cross-channel prior needs them
         # the history's per-row sums (admm.cl zu_step, dual_and_misfit) and per-work-item
         # squared updates of lens_solve, fetched in one copy per iteration
         self._rows = 3 * self.height
         self._lens_grid = (2 * -(-(self.width // self.V) // 4), self.height // self.U, 3)
         self._sums_host = np.empty(5 * self._rows + int(np.prod(self._lens_grid)), np.float32)
-        # zeros: state_sums() reads the misfit partials only, the others must not hold garbage
         self._sums = runtime.zeros(self._sums_host.shape)
-
-    def _buffer(self, name: str, shape):
-        """A float32 device array of ``shape``: a view of the given buffer ``name``, or new."""
-        given = self._given.pop(name, None)
-        if given is None:
-            return self.runtime.empty(shape)
-        if given.nbytes < 4 * math.prod(shape) or given.dtype != np.float32:
-            raise ValueError(f"buffer {name} holds {given.nbytes} bytes, {shape} needs {4 * math.prod(shape)}")
-        return cla.Array(self.runtime.queue, shape, np.float32, data=given.base_data, offset=given.offset)
-
-    def buffers(self) -> dict:
-        """This solver's work and state buffers by name (see ``buffers`` of the constructor)."""
-        named = {"z": self._z, "u": self._u, "dz": self._dz, "rhs": self._rhs, "tmp": self._tmp}
-        if self._cross_buffers is not None:
-            named.update(zip(("zc", "uc", "dxc", "dzc"), self._cross_buffers))
-        return named
 
     @property
     def _defines(self) -> tuple:
@@ -305,7 +258,7 @@ class AdmmSolver:
         """Stack the cross-channel block D C under D in K (solve() sets it from params.lam_xc)."""
         self._cross_channel = bool(enabled)
         if enabled and self._cross_buffers is None:
-            self._cross_buffers = [self._buffer(name, self.DC.gradient_shape) for name in ("zc", "uc", "dxc", "dzc")]
+            self._cross_buffers = [self.runtime.empty(self.DC.gradient_shape) for _ in range(4)]
 
     # --- the x-update: (A^T W A + rho K^T K) x = rhs by Jacobi-preconditioned CG ---
 
@@ -461,46 +414,10 @@ class AdmmSolver:
             self.DC.forward(x, out=zc)
             uc.fill(0)
 
-    def duals(self) -> list:
-        """The ADMM state besides x, as device arrays: z, u (and zc, uc with the cross-channel
-        block). :meth:`iterate` goes on from what they hold (lfcl/solvers/freeze.py moves them)."""
-        state = [self._z, self._u]
-        if self._cross_channel:
-            state += self._cross_buffers[:2]
-        return state
-
     def finish(self, x):
         """After the last iteration: dark pixels (neither data nor prior) get the harmonic extension."""
         if self._prior_mask:
             self.fill(x, np.asarray(self._weights_key).reshape(self.U, self.V), self._weights)
-
-    def lens_group_changes(self) -> np.ndarray:
-        """Squared x-update of the last exact iteration per lens row and group of 4 lens columns,
-        float64 [S, ceil(T / 4)]: lens_solve's work-items g = 2j and 2j + 1 hold lenses 4j .. 4j + 3
-        (admm.cl), and their partials reach the host with the history's sums anyway."""
-        groups, lens_rows, _ = self._lens_grid
-        partials = self._sums_host[5 * self._rows:].reshape(3, lens_rows, groups // 2, 2)
-        return partials.sum(axis=(0, 3), dtype=np.float64)
-
-    def state_sums(self, b, x, params: AdmmParams) -> OutsideSums:
-        """The history's sums of the state held now (x, z[, zc]), computed afresh: the misfit
-        ||W^(1/2) (A x - b)||^2, the prior lam ||M D x||_1 (+ lam_xc ||M D C x||_1) and the
-        primal residual ||K x - z||^2. Uses the dz/tmp scratch buffers; the state is unchanged."""
-        self.D.forward(x, out=self._dz)
-        self.dual_and_misfit(x, b)  # the misfit's row sums (its dual part, of D x here, is not used)
-        requests = [("abs_sum", self._dz), ("diff_norm2", self._dz, self._z)]
-        if self._cross_channel:
-            zc, _, dxc, _ = self._cross_buffers
-            self.DC.forward(x, out=dxc)
-            requests += [("abs_sum", dxc), ("diff_norm2", dxc, zc)]
-        enqueued = [self.reduce.enqueue(i, *request) for i, request in enumerate(requests)]
-        misfit2 = self._fetch_sums(with_change=False)[4]
-        tv, primal2, *cross = self.reduce.collect(enqueued)
-        prior = params.lam * tv
-        if cross:
-            prior += params.lam_xc * cross[0]
-            primal2 += cross[1]
-        return OutsideSums(samples=x.size, misfit2=misfit2, prior=prior, primal2=primal2)
 
     def solve(self, b, x0, params: AdmmParams, callback=None, lens_weights=None, samples: int | None = None
               ) -> AdmmResult:
@@ -520,26 +437,19 @@ class AdmmSolver:
         x = x0.copy()
         self.start(x)
         history: list[IterationRecord] = []
-        outside = OutsideSums(samples=samples if samples is not None else x.size)
-        reason = self.iterate(b, x, params, history, callback=callback, outside=outside)
+        reason = self.iterate(b, x, params, history, callback=callback, samples=samples)
         self.finish(x)
         return AdmmResult(x=x, history=history, stop_reason=reason)
 
-    def iterate(self, b, x, params: AdmmParams, history: list, *, callback=None, outside: OutsideSums | None = None,
-                handover=None) -> str | None:
-        """ADMM iterations on ``x`` in place, from the duals held now (:meth:`start`, :meth:`duals`),
-        appending to ``history``, until the stop rule holds (returns its reason) or
-        ``handover(solver, record, own)`` returns True (returns None: the caller takes the state
-        on elsewhere, lfcl/solvers/freeze.py). :meth:`prepare` first.
-
-        ``outside``: lenses solved elsewhere (frozen), added to every record so that the history
-        and the stop rule stay the whole problem's; ``own`` (an :class:`OutsideSums`) holds this
-        solver's part of the record's sums.
+    def iterate(self, b, x, params: AdmmParams, history: list, *, callback=None, samples: int | None = None) -> str:
+        """ADMM iterations on ``x`` in place, from the duals held now (:meth:`start`), appending to
+        ``history``, until the stop rule holds (returns its reason). :meth:`prepare` first.
+        ``samples``: the samples the rms change is over (default: all of x).
         """
         rho, lam = params.rho, params.lam
         vec, red, D, DC = self.vectors, self.reduce, self.D, self.DC
         cross, exact = self._cross_channel, self._exact
-        outside = outside if outside is not None else OutsideSums(samples=x.size)
+        samples = samples if samples is not None else x.size
         n_z = self._z.size
         if cross:
             zc, uc, dxc, dzc = self._cross_buffers
@@ -577,13 +487,12 @@ class AdmmSolver:
             if cross:
                 primal2 += cross_sums[0]
                 prior += params.lam_xc * cross_sums[1]
-            own = OutsideSums(samples=x.size, misfit2=misfit2, prior=prior, primal2=primal2)
             record = IterationRecord(
                 iteration=len(history) + 1,
-                objective=0.5 * (misfit2 + outside.misfit2) + prior + outside.prior,
-                primal_residual=math.sqrt(primal2 + outside.primal2),
-                dual_residual=rho * math.sqrt(dual2),  # frozen lenses' z no longer moves
-                rms_change=math.sqrt((change2 + outside.change2) / outside.samples),  # frozen: their last
+                objective=0.5 * misfit2 + prior,
+                primal_residual=math.sqrt(primal2),
+                dual_residual=rho * math.sqrt(dual2),
+                rms_change=math.sqrt(change2 / samples),
                 cg_steps=steps,
             )
             history.append(record)
@@ -598,8 +507,6 @@ class AdmmSolver:
                     DC.adjoint(uc, out=self._tmp, accumulate=True)
                 primal_scale = math.sqrt(max(kx2, z2))
                 dual_scale = rho * math.sqrt(red.norm2(self._tmp))
-            reason = stop_reason(params, record, primal_scale, dual_scale, n_z, outside.samples)
+            reason = stop_reason(params, record, primal_scale, dual_scale, n_z, samples)
             if reason:
                 return reason
-            if handover is not None and handover(self, record, own):
-                return None

@@ -7,7 +7,7 @@ read how PSNR moves with lambda and with the iteration count, and score stopping
 rules "stop when rms change <= d * sigma" against the best iterate that ground
 truth would pick.
 
-    python -m lfcl.bench.sweep -o sweep.json [--lenses 64x64] [--lux 1,4,12,50]
+    python research/sweep.py -o sweep.json [--lenses 64x64] [--lux 1,4,12,50]
 """
 
 from __future__ import annotations
@@ -18,15 +18,15 @@ import time
 
 import numpy as np
 
-from ..device import get_runtime
-from ..evaluate import capture_in_memory
-from ..layout import LightFieldShape, planes_to_exchange
-from ..methods import ADMM_DEFAULTS
-from ..metrics import lightfield_scores
-from ..noise import from_noise_profile
-from ..ops.malvar import Malvar
-from ..solvers.admm import AdmmSolver
-from ..solvers.params import AdmmParams
+from lfcl.device import get_runtime
+from lfcl.evaluate import capture_in_memory
+from lfcl.layout import LightFieldShape, planes_to_exchange
+from lfcl.methods import ADMM_DEFAULTS
+from lfcl.metrics import lightfield_scores
+from lfcl.noise import from_noise_profile
+from lfcl.ops.malvar import Malvar
+from lfcl.solvers.admm import AdmmSolver
+from lfcl.solvers.params import AdmmParams
 
 
 def sweep_capture(capture, method: str, lam_factors, max_iter: int, runtime, rho: float | None = None) -> dict:

@@ -7,7 +7,7 @@ the same iterations and reports ms per iteration, the objective reached and the
 scores, with the plain (u, v) prior for comparison.
 
     lfcl simulate --scene charts --lenses 64x64 --lux 12 --seed 0 -o cap
-    python -m lfcl.bench.xc_update cap --iterations 20
+    python research/xc_update.py cap --iterations 20
 """
 
 from __future__ import annotations
@@ -15,15 +15,15 @@ from __future__ import annotations
 import argparse
 import time
 
-from ..device import get_runtime
-from ..evaluate import load_capture
-from ..layout import LightFieldShape, planes_to_exchange
-from ..methods import ADMM_DEFAULTS
-from ..metrics import lightfield_colour_scores, lightfield_scores
-from ..noise import from_noise_profile
-from ..ops.malvar import Malvar
-from ..solvers.admm import AdmmSolver
-from ..solvers.params import AdmmParams
+from lfcl.device import get_runtime
+from lfcl.evaluate import load_capture
+from lfcl.layout import LightFieldShape, planes_to_exchange
+from lfcl.methods import ADMM_DEFAULTS
+from lfcl.metrics import lightfield_colour_scores, lightfield_scores
+from lfcl.noise import from_noise_profile
+from lfcl.ops.malvar import Malvar
+from lfcl.solvers.admm import AdmmSolver
+from lfcl.solvers.params import AdmmParams
 
 
 def main(argv=None):

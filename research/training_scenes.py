@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..sim.planes import Plane
+from lfcl.sim.planes import Plane
 
 RASTER_SCALE = 8
 KINDS = ("mondrian", "grating", "noise", "lines", "smooth")

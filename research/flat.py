@@ -1,7 +1,7 @@
 """Measure skipping flat lenses (lfcl/flat_lenses.py, docs/auto.md): each ADMM method with every
 lens solved against the same method leaving the flat lenses out (the default).
 
-    python -m lfcl.bench.flat [--lenses 64,160] [--scenes charts,deadleaves] [--lightfield PATH]
+    python research/flat.py [--lenses 64,160] [--scenes charts,deadleaves] [--lightfield PATH]
                               [--lux 2,12,50] [--methods admm-uv,admm-uv-xc,admm-uv-xc:linear4d]
                               [--p 0.01] [--repeats 3] [--seed 0] [-o flat.json]
 
@@ -21,12 +21,12 @@ import time
 
 import numpy as np
 
-from ..imageio import write_json
-from ..layout import LightFieldShape, planes_to_exchange
-from ..methods import demosaic_lightfield
-from ..metrics import lightfield_scores
-from ..noise import from_noise_profile
-from .timing import add_capture_arguments, captures
+from lfcl.imageio import write_json
+from lfcl.layout import LightFieldShape, planes_to_exchange
+from lfcl.methods import demosaic_lightfield
+from lfcl.metrics import lightfield_scores
+from lfcl.noise import from_noise_profile
+from lfcl.bench.timing import add_capture_arguments, captures
 
 
 def measure(capture, label: str, repeats: int, threshold: float | None = None) -> dict:

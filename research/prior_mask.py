@@ -12,7 +12,7 @@ dark pixels out of the data term only (``prior_mask=False``, the old behaviour)
 and out of the prior too (the default). Scores against the truth: PSNR and mean
 CIEDE2000 on the centre view and the mean image, also over the lit pixels alone.
 
-    python -m lfcl.bench.prior_mask --scene charts --lux 1,12,50 --f-number 0.4
+    python research/prior_mask.py --scene charts --lux 1,12,50 --f-number 0.4
 """
 
 from __future__ import annotations
@@ -23,15 +23,15 @@ import time
 
 import numpy as np
 
-from ..calib import calibrate_array
-from ..device import get_runtime
-from ..flatfield import DEFAULT_THRESHOLD, flat_field, lens_response_from_calibration, lens_response_from_white
-from ..layout import LightFieldShape, planes_to_exchange
-from ..methods import ADMM_DEFAULTS, admm_params
-from ..metrics import lightfield_colour_scores, lightfield_scores, psnr
-from ..noise import from_noise_profile
-from ..ops.malvar import Malvar
-from ..solvers.admm import AdmmSolver
+from lfcl.calib import calibrate_array
+from lfcl.device import get_runtime
+from lfcl.flatfield import DEFAULT_THRESHOLD, flat_field, lens_response_from_calibration, lens_response_from_white
+from lfcl.layout import LightFieldShape, planes_to_exchange
+from lfcl.methods import ADMM_DEFAULTS, admm_params
+from lfcl.metrics import lightfield_colour_scores, lightfield_scores, psnr
+from lfcl.noise import from_noise_profile
+from lfcl.ops.malvar import Malvar
+from lfcl.solvers.admm import AdmmSolver
 
 
 def lit_psnr(lightfield: np.ndarray, truth: np.ndarray, lit: np.ndarray) -> float:
@@ -41,7 +41,7 @@ def lit_psnr(lightfield: np.ndarray, truth: np.ndarray, lit: np.ndarray) -> floa
 
 def run(scene: str, lux: float, f_number: float, methods, seed: int = 0, lenses=(64, 64),
         response_from: str = "calibration") -> list[dict]:
-    from ..sim import simulate
+    from lfcl.sim import simulate
 
     sim = simulate(scene, lenses=lenses, lux=lux, seed=seed, vignetting=True, f_number=f_number)
     mosaic = sim.normalised_raw()

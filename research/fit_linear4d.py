@@ -1,8 +1,8 @@
 """Fit the linear4d coefficients (lfcl/ops/linear4d.py) by ridge-regularised least squares.
 
-    python -m lfcl.bench.fit_linear4d -o lfcl/data/linear4d.npz
+    python research/fit_linear4d.py -o lfcl/data/linear4d.npz
 
-Training data: the procedural scenes of :mod:`lfcl.bench.training_scenes` (never
+Training data: the procedural scenes of research/training_scenes.py (never
 the evaluation scenes ``charts`` and ``deadleaves``), seeds ``--seed-base`` ..
 ``--seed-base + --scenes - 1``, each rendered once and exposed by the simulator's
 sensor at every ``--lux`` level (:func:`lfcl.sim.simulate` with the rendered light
@@ -29,10 +29,10 @@ import time
 
 import numpy as np
 
-from .. import __version__
-from ..layout import exchange_to_planes
-from ..noise import from_noise_profile
-from ..ops.linear4d import (
+from lfcl import __version__
+from lfcl.layout import exchange_to_planes
+from lfcl.noise import from_noise_profile
+from lfcl.ops.linear4d import (
     CLASSES,
     Linear4dModel,
     cfa_classes,
@@ -42,7 +42,7 @@ from ..ops.linear4d import (
     tap_samples,
     valid_taps,
 )
-from .training_scenes import training_planes
+from training_scenes import training_planes
 
 DEFAULT_LUX = (0.5, 1.0, 2.0, 4.0, 8.0, 12.0, 25.0, 50.0)
 PATTERN = "GRBG"  # the simulator's default; coefficients are stored per CFA class, pattern-free
@@ -145,7 +145,7 @@ def solve(equations: NormalEquations, pitch, taps, ridge: float, keep_flat_colou
 
 def render_training_scenes(lenses, pitch, seeds):
     """Yield ``(seed, light field [S, T, U, V, 3])`` of the training scenes (noise-free, relative units)."""
-    from ..sim import render_planes
+    from lfcl.sim import render_planes
 
     for seed in seeds:
         yield seed, render_planes(training_planes(lenses, seed, pitch), lenses, pitch)
@@ -160,7 +160,7 @@ def fit(lenses=(64, 64), pitch=(9, 9), lux_levels=DEFAULT_LUX, scenes: int = 48,
 
     ``layout``: the arguments of :func:`tap_layout` (default :data:`DEFAULT_LAYOUT`).
     """
-    from ..sim import simulate
+    from lfcl.sim import simulate
 
     pitch = tuple(int(p) for p in pitch)
     lenses = tuple(int(n) for n in lenses)
@@ -184,8 +184,8 @@ def fit(lenses=(64, 64), pitch=(9, 9), lux_levels=DEFAULT_LUX, scenes: int = 48,
     coefficients = np.stack([solve(eq, pitch, taps, ridge) for eq in equations]).astype(np.float32)
     metadata = {
         "lfcl_version": __version__,
-        "generator": "python -m lfcl.bench.fit_linear4d",
-        "training_scenes": {"generator": "lfcl.bench.training_scenes.training_planes", "seeds": seeds,
+        "generator": "python research/fit_linear4d.py",
+        "training_scenes": {"generator": "research/training_scenes.py training_planes", "seeds": seeds,
                             "lenses": list(lenses), "pattern": PATTERN},
         "lux": lux_levels,
         "noise_seed": "the scene seed (lfcl.sim.simulate seed)",
@@ -216,14 +216,14 @@ def main(argv=None):
     parser.add_argument("--no-diagonal-lenses", action="store_true")
     parser.add_argument("--ridge", type=float, default=1e-4)
     args = parser.parse_args(argv)
-    from ..sim import parse_lenses
+    from lfcl.sim import parse_lenses
 
     layout = {"in_lens_radius": args.in_lens_radius, "cross_radius": args.cross_radius,
               "diagonal_lenses": not args.no_diagonal_lenses}
     start = time.perf_counter()
     model = fit(parse_lenses(args.lenses), (args.pitch, args.pitch), [float(x) for x in args.lux.split(",")],
                 args.scenes, args.seed_base, layout, args.ridge, progress=lambda m: print(m, flush=True))
-    model.metadata["command"] = "python -m lfcl.bench.fit_linear4d " + " ".join(argv or __import__("sys").argv[1:])
+    model.metadata["command"] = "python research/fit_linear4d.py " + " ".join(argv or __import__("sys").argv[1:])
     save_model(args.output, model)
     print(f"wrote {args.output}: {len(model.relative_noise)} sets x {len(model.taps)} taps "
           f"in {time.perf_counter() - start:.0f} s")

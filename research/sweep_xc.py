@@ -8,8 +8,8 @@ mean CIEDE2000 (centre view, mean image) and rms(x_k - x_{k-1}). Then score the
 rules "lam = c sigma, lam_xc = e sigma, stop when the rms change <= d sigma" and
 "..., run exactly K iterations" over all captures (``summarise``).
 
-    python -m lfcl.bench.sweep_xc -o sweep_xc.json --seeds 1,2 --lux 1,4,12,50
-    python -m lfcl.bench.sweep_xc --summarise sweep_xc.json
+    python research/sweep_xc.py -o sweep_xc.json --seeds 1,2 --lux 1,4,12,50
+    python research/sweep_xc.py --summarise sweep_xc.json
 """
 
 from __future__ import annotations
@@ -20,16 +20,16 @@ import time
 
 import numpy as np
 
-from ..device import get_runtime
-from ..evaluate import capture_in_memory
-from ..imageio import write_json
-from ..layout import LightFieldShape, planes_to_exchange
-from ..methods import ADMM_DEFAULTS, admm_params
-from ..metrics import lightfield_colour_scores, lightfield_scores
-from ..noise import from_noise_profile
-from ..ops.malvar import Malvar
-from ..solvers.admm import AdmmSolver
-from ..solvers.params import AdmmParams
+from lfcl.device import get_runtime
+from lfcl.evaluate import capture_in_memory
+from lfcl.imageio import write_json
+from lfcl.layout import LightFieldShape, planes_to_exchange
+from lfcl.methods import ADMM_DEFAULTS, admm_params
+from lfcl.metrics import lightfield_colour_scores, lightfield_scores
+from lfcl.noise import from_noise_profile
+from lfcl.ops.malvar import Malvar
+from lfcl.solvers.admm import AdmmSolver
+from lfcl.solvers.params import AdmmParams
 
 METHOD_DIMS = {"admm-uv-xc": "uv", "admm-uvst-xc": "uvst"}
 KEYS = ("psnr_center", "psnr_mean", "de2000_mean_center", "de2000_mean_mean")

@@ -1,0 +1,132 @@
+// Photo-consistency cost volume for disparity from a lenslet mosaic (lfcl/depth/cost.py has the
+// derivation and the numpy twin cost_volume_np).
+//
+// One work-item per (lens t, lens s, candidate k). For every view (u, v) the centre-view lens
+// (s, t) is seen at the fractional lens (y, x) = (s - d (u - uc), t - d (v - vc)); the raw samples
+// of view (u, v) in the four lenses around it are gathered with bilinear weights, each under its
+// own CFA colour, at centre-view offset p = (s' - y, t' - x). Per colour: weighted sums for a
+// least-squares plane a + g.p (ridge RIDGE * W on g; PLANE_MODEL=0: the mean only), then
+//   excess = sum_c RSS_c / nv_c - (W_c - tr((A_c + R_c)^-1 B_c)),   weight = sum_c W_c.
+// Values are taken relative to the lens's own centre pixel (conditioning in float32 only).
+//
+// Build-time constants: PITCH_U, PITCH_V, PLANE_MODEL (0/1), RIDGE_PPM and MIN_WEIGHT_PPM (the
+// ridge factor and the smallest colour weight kept, in millionths).
+// Only the views u_lo <= u <= u_hi, v_lo <= v <= v_hi are gathered (a half aperture sees past an
+// occluder that the other half runs into).
+// Output: cost[0][k][s][t] = excess, cost[1][k][s][t] = weight. Global size (T, S, ND).
+
+#define RIDGE (RIDGE_PPM * 1e-6f)
+#define MIN_WEIGHT (MIN_WEIGHT_PPM * 1e-6f)
+#define NSUM 16
+
+__kernel void depth_cost(__global const float *mosaic, __constant float *disparities, __global float *cost,
+                         const int S, const int T, const int ND, const int pattern,
+                         const float gain, const float floor_var, const float saturation,
+                         const int u_lo, const int u_hi, const int v_lo, const int v_hi)
+{
+    const int t = get_global_id(0);
+    const int s = get_global_id(1);
+    const int k = get_global_id(2);
+    if (t >= T || s >= S || k >= ND)
+        return;
+    const int W = T * PITCH_V;
+    const float d = disparities[k];
+    const float uc = 0.5f * (float)(PITCH_U - 1);
+    const float vc = 0.5f * (float)(PITCH_V - 1);
+    const float ref = mosaic[(s * PITCH_U + PITCH_U / 2) * W + t * PITCH_V + PITCH_V / 2];
+
+    float acc[3][NSUM];
+    for (int c = 0; c < 3; ++c)
+        for (int j = 0; j < NSUM; ++j)
+            acc[c][j] = 0.0f;
+
+    for (int u = max(u_lo, 0); u <= min(u_hi, PITCH_U - 1); ++u) {
+        const float y = (float)s - d * ((float)u - uc);
+        const float y0 = floor(y);
+        const float fy = y - y0;
+        for (int v = max(v_lo, 0); v <= min(v_hi, PITCH_V - 1); ++v) {
+            const float x = (float)t - d * ((float)v - vc);
+            const float x0 = floor(x);
+            const float fx = x - x0;
+            for (int a = 0; a < 2; ++a) {
+                const int sp = (int)y0 + a;
+                const float wy = a ? fy : 1.0f - fy;
+                if (sp < 0 || sp >= S || !(wy > 0.0f))
+                    continue;
+                const float py = (float)a - fy;
+                const int row = sp * PITCH_U + u;
+                for (int b = 0; b < 2; ++b) {
+                    const int tp = (int)x0 + b;
+                    const float wx = b ? fx : 1.0f - fx;
+                    if (tp < 0 || tp >= T || !(wx > 0.0f))
+                        continue;
+                    const float px = (float)b - fx;
+                    const int col = tp * PITCH_V + v;
+                    const float raw = mosaic[row * W + col];
+                    if (!(raw < saturation))
+                        continue;
+                    const float value = raw - ref;
+                    const float w = wy * wx;
+                    const float w2 = w * w;
+                    const int c = bayer_colour(row, col, pattern);
+                    acc[c][0] += w;
+                    acc[c][1] += w * py;
+                    acc[c][2] += w * px;
+                    acc[c][3] += w * py * py;
+                    acc[c][4] += w * px * px;
+                    acc[c][5] += w * py * px;
+                    acc[c][6] += w * value;
+                    acc[c][7] += w * value * py;
+                    acc[c][8] += w * value * px;
+                    acc[c][9] += w * value * value;
+                    acc[c][10] += w2;
+                    acc[c][11] += w2 * py;
+                    acc[c][12] += w2 * px;
+                    acc[c][13] += w2 * py * py;
+                    acc[c][14] += w2 * px * px;
+                    acc[c][15] += w2 * py * px;
+                }
+            }
+        }
+    }
+
+    float excess = 0.0f, weight = 0.0f;
+    for (int c = 0; c < 3; ++c) {
+        const float Wc = acc[c][0];
+        if (!(Wc >= MIN_WEIGHT))
+            continue;
+        const float mean = acc[c][6] / Wc + ref;  // the sums are of values less ref
+        const float nv = fmax(gain * fmax(mean, 0.0f) + floor_var, 1e-12f);
+        float rss, trace;
+#if PLANE_MODEL
+        const float r = RIDGE * Wc;
+        // A = [[W, Sy, Sx], [Sy, Syy + r, Syx], [Sx, Syx, Sxx + r]] (symmetric): inverse by cofactors.
+        const float a00 = Wc, a01 = acc[c][1], a02 = acc[c][2];
+        const float a11 = acc[c][3] + r, a12 = acc[c][5], a22 = acc[c][4] + r;
+        const float c00 = a11 * a22 - a12 * a12;
+        const float c01 = a02 * a12 - a01 * a22;
+        const float c02 = a01 * a12 - a02 * a11;
+        const float c11 = a00 * a22 - a02 * a02;
+        const float c12 = a01 * a02 - a00 * a12;
+        const float c22 = a00 * a11 - a01 * a01;
+        const float inv_det = 1.0f / (a00 * c00 + a01 * c01 + a02 * c02);
+        const float i00 = c00 * inv_det, i01 = c01 * inv_det, i02 = c02 * inv_det;
+        const float i11 = c11 * inv_det, i12 = c12 * inv_det, i22 = c22 * inv_det;
+        const float b0 = acc[c][6], b1 = acc[c][7], b2 = acc[c][8];
+        rss = acc[c][9] - (b0 * (i00 * b0 + i01 * b1 + i02 * b2) + b1 * (i01 * b0 + i11 * b1 + i12 * b2)
+                           + b2 * (i02 * b0 + i12 * b1 + i22 * b2));
+        // tr(Ainv B), B = [[Q, Qy, Qx], [Qy, Qyy, Qyx], [Qx, Qyx, Qxx]] (both symmetric).
+        const float q00 = acc[c][10], q01 = acc[c][11], q02 = acc[c][12];
+        const float q11 = acc[c][13], q12 = acc[c][15], q22 = acc[c][14];
+        trace = i00 * q00 + i11 * q11 + i22 * q22 + 2.0f * (i01 * q01 + i02 * q02 + i12 * q12);
+#else
+        rss = acc[c][9] - acc[c][6] * acc[c][6] / Wc;
+        trace = acc[c][10] / Wc;
+#endif
+        excess += rss / nv - (Wc - trace);
+        weight += Wc;
+    }
+    const int plane = S * T;
+    cost[(size_t)k * plane + s * T + t] = excess;
+    cost[(size_t)(ND + k) * plane + s * T + t] = weight;
+}

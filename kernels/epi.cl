@@ -1,0 +1,258 @@
+// The prior along the epipolar lines (lfcl/ops/epi.py, docs/admm.md "admm-epi"): differences between
+// each sample and its neighbour along its local disparity line, and the exact adjoint, both as gathers.
+//
+// A point seen at lens (s, t) in the centre view is seen by view (u, v) at lens (s - d (u - uc),
+// t - d (v - vc)), d in lenses per view step. On the sensor-shaped planes (row = s*U + u,
+// col = t*V + v), for sample i = (s, t, u, v) of channel c:
+//
+//   u-block: z_u[i] = w_i (x(s - d_i, t, u + 1, v) - x(s, t, u, v))   (0 at u = U - 1)
+//   v-block: z_v[i] = w_i (x(s, t - d_i, u, v + 1) - x(s, t, u, v))   (0 at v = V - 1)
+//
+// x at a fractional lens s - d_i: Catmull-Rom (Keys, a = -1/2) cubic interpolation over the 4 lenses
+// floor(p) - 1 .. floor(p) + 2 along s (along t for the v-block), lens indices clamped to the frame.
+// `rays` holds d_i (plane 0) and w_i (plane 1) per sample, [2, H, W]: the host reads them from the lens
+// maps (lfcl/ops/epi.py ray_maps_np), so the twin and the device use the same numbers.
+//
+// Both work on runs of 16 columns of one row (col0 .. col0 + 15, one SIMD register on a CPU, as
+// gradient.cl). The lanes of a run have their own disparities, so instead of gathering per lane, a
+// kernel loops over the few lens offsets m that any lane's taps reach (`offsets`, tabulated per lens row
+// by the host, lfcl/ops/epi.py offset_table_np) and adds, per lane, the summed weight of its taps on that
+// lens times one contiguous 16-column load: vector loads only.
+//
+//   forward, u-block: x(s - d, t, u + 1, v) = sum_m [taps on lens s + m] x[row (s + m) U + u + 1, same cols]
+//   forward, v-block: x(s, t - d, u, v + 1) = sum_m [taps on lens t + m] x[same row, col + m V + 1]
+//   adjoint, u-block: target (s', u') gathers from the rows (s' + k) U + u' - 1, the taps of each lane of
+//                     that source row that land on s' (k over the offsets of sources that reach s');
+//   adjoint, v-block: target col' gathers from col' + k V - 1 (sources (t' + k, v' - 1)), lanes v' > 0.
+//
+// No atomics: the adjoint is a gather, deterministic. With `squared` the adjoint writes diag(D^T D)
+// ([H, W], one channel): the squared coefficients (the taps of one row on one lens summed first).
+// `offsets` int [4, S, 2]: per lens row, (lo, hi) of the forward u, forward v, adjoint u, adjoint v
+// offsets. Global size: (ceil(W / 16), H).
+
+#pragma OPENCL FP_CONTRACT OFF
+
+#define MAX_CHANNELS 4
+
+// The Catmull-Rom taps of p (lane-wise) at floor(p) - 1 .. floor(p) + 2 (Keys, a = -1/2), their lens
+// indices clamped to [0, n - 1] (floats: small integers, exact), weights of f = p - floor(p).
+typedef struct { float16 i0, i1, i2, i3, w0, w1, w2, w3; } Taps;
+
+inline Taps lens_taps(float16 p, int n)
+{
+    Taps k;
+    const float16 base = floor(p), f = p - base, f2 = f * f, f3 = f2 * f, hi = (float16)(float)(n - 1);
+    k.i0 = clamp(base - 1.0f, 0.0f, hi);
+    k.i1 = clamp(base, 0.0f, hi);
+    k.i2 = clamp(base + 1.0f, 0.0f, hi);
+    k.i3 = clamp(base + 2.0f, 0.0f, hi);
+    k.w0 = -0.5f * f3 + f2 - 0.5f * f;
+    k.w1 = 1.5f * f3 - 2.5f * f2 + 1.0f;
+    k.w2 = -1.5f * f3 + 2.0f * f2 + 0.5f * f;
+    k.w3 = 0.5f * f3 - 0.5f * f2;
+    return k;
+}
+
+// Per lane: the summed weight of the taps that land on lens `target`.
+inline float16 weight_on(const Taps *k, float16 target)
+{
+    const float16 zero = (float16)0.0f;
+    return select(zero, k->w0, k->i0 == target) + select(zero, k->w1, k->i1 == target)
+         + select(zero, k->w2, k->i2 == target) + select(zero, k->w3, k->i3 == target);
+}
+
+inline int any_nonzero(float16 v)
+{
+    return any(v != 0.0f);
+}
+
+__kernel void epi_forward(__global const float *x, __global float *z, __global const float *rays,
+                          __global const int *offsets, const int height, const int width, const int channels)
+{
+    const int col0 = 16 * get_global_id(0), row = get_global_id(1);
+    if (col0 >= width || row >= height) return;
+    const int S = height / PITCH_U, T = width / PITCH_V;
+    const int s = row / PITCH_U, u = row % PITCH_U;
+    const size_t plane = (size_t)height * width, base = (size_t)row * width;
+    const int16 cols = lane_columns(col0);
+    const float16 t = convert_float16(cols / PITCH_V);
+    const float16 d = load_row(rays + base, col0, 0, width), w = load_row(rays + plane + base, col0, 0, width);
+    float16 own[MAX_CHANNELS], acc[MAX_CHANNELS];
+    for (int c = 0; c < channels; ++c) own[c] = load_row(x + c * plane + base, col0, 0, width);
+    // u-block: the neighbour (s - d, t, u + 1, v), interpolated along s
+    for (int c = 0; c < channels; ++c) acc[c] = (float16)0.0f;
+    if (u < PITCH_U - 1) {
+        const Taps k = lens_taps((float16)(float)s - d, S);
+        for (int m = offsets[2 * s]; m <= offsets[2 * s + 1]; ++m) {
+            const int lens = s + m;
+            if (lens < 0 || lens >= S) continue;
+            const float16 weight = weight_on(&k, (float16)(float)lens);
+            if (!any_nonzero(weight)) continue;
+            const size_t next = (size_t)(lens * PITCH_U + u + 1) * width;
+            for (int c = 0; c < channels; ++c) acc[c] += weight * load_row(x + c * plane + next, col0, 0, width);
+        }
+        for (int c = 0; c < channels; ++c) acc[c] = w * (acc[c] - own[c]);
+    }
+    for (int c = 0; c < channels; ++c) store_row(acc[c], z + c * plane + base, col0, width);
+    // v-block: the neighbour (s, t - d, u, v + 1), interpolated along t
+    const int16 has_next = cols % PITCH_V < PITCH_V - 1;
+    const Taps k = lens_taps(t - d, T);
+    for (int c = 0; c < channels; ++c) acc[c] = (float16)0.0f;
+    for (int m = offsets[2 * S + 2 * s]; m <= offsets[2 * S + 2 * s + 1]; ++m) {
+        const float16 weight = select((float16)0.0f, weight_on(&k, t + (float)m), has_next);
+        if (!any_nonzero(weight)) continue;
+        for (int c = 0; c < channels; ++c)
+            acc[c] += weight * load_row(x + c * plane + base, col0, m * PITCH_V + 1, width);
+    }
+    for (int c = 0; c < channels; ++c)
+        store_row(select((float16)0.0f, w * (acc[c] - own[c]), has_next), z + (channels + c) * plane + base, col0,
+                  width);
+}
+
+// x (+)= D^T z, or with `squared` x (+)= diag(D^T D) (one [H, W] plane; z is not read).
+__kernel void epi_adjoint(__global const float *z, __global float *x, __global const float *rays,
+                          __global const int *offsets, const int height, const int width, const int channels,
+                          const int accumulate, const int squared)
+{
+    const int col0 = 16 * get_global_id(0), row = get_global_id(1);
+    if (col0 >= width || row >= height) return;
+    const int S = height / PITCH_U, T = width / PITCH_V;
+    const int s1 = row / PITCH_U, u1 = row % PITCH_U;
+    const size_t plane = (size_t)height * width, base = (size_t)row * width;
+    const int n = squared ? 1 : channels;
+    __global const float *zu = z, *zv = z + (size_t)channels * plane;
+    const int16 cols = lane_columns(col0);
+    const float16 t1 = convert_float16(cols / PITCH_V);
+    const int16 v_pos = cols % PITCH_V;
+    float16 acc[MAX_CHANNELS];
+    for (int c = 0; c < n; ++c) acc[c] = accumulate ? load_row(x + c * plane + base, col0, 0, width) : (float16)0.0f;
+    // the sample's own rows: -w at itself
+    const float16 w_own = load_row(rays + plane + base, col0, 0, width);
+    const float16 w_u = u1 < PITCH_U - 1 ? w_own : (float16)0.0f;
+    const float16 w_v = select((float16)0.0f, w_own, v_pos < PITCH_V - 1);
+    if (squared) {
+        acc[0] += w_u * w_u + w_v * w_v;
+    } else {
+        for (int c = 0; c < n; ++c)
+            acc[c] -= w_u * load_row(zu + c * plane + base, col0, 0, width)
+                    + w_v * load_row(zv + c * plane + base, col0, 0, width);
+    }
+    // u-block rows (s1 + k, t, u1 - 1, v) whose taps along s land on s1
+    if (u1 > 0) {
+        for (int k = offsets[4 * S + 2 * s1]; k <= offsets[4 * S + 2 * s1 + 1]; ++k) {
+            const int s = s1 + k;
+            if (s < 0 || s >= S) continue;
+            const size_t source = (size_t)(s * PITCH_U + u1 - 1) * width;
+            const Taps taps = lens_taps((float16)(float)s - load_row(rays + source, col0, 0, width), S);
+            const float16 coef = load_row(rays + plane + source, col0, 0, width) * weight_on(&taps, (float16)(float)s1);
+            if (!any_nonzero(coef)) continue;
+            if (squared)
+                acc[0] += coef * coef;
+            else
+                for (int c = 0; c < n; ++c) acc[c] += coef * load_row(zu + c * plane + source, col0, 0, width);
+        }
+    }
+    // v-block rows (s1, t1 + k, u1, v - 1) whose taps along t land on t1 (lanes with v > 0)
+    for (int k = offsets[6 * S + 2 * s1]; k <= offsets[6 * S + 2 * s1 + 1]; ++k) {
+        const int shift = k * PITCH_V - 1;
+        const float16 t = t1 + (float)k;
+        const Taps taps = lens_taps(t - load_row(rays + base, col0, shift, width), T);
+        // outside the row the loaded weight is 0; sources past the frame (t >= T) have none either
+        const float16 coef = select((float16)0.0f,
+                                    load_row(rays + plane + base, col0, shift, width) * weight_on(&taps, t1),
+                                    (v_pos > 0) & (t < (float)T));
+        if (!any_nonzero(coef)) continue;
+        if (squared)
+            acc[0] += coef * coef;
+        else
+            for (int c = 0; c < n; ++c) acc[c] += coef * load_row(zv + c * plane + base, col0, shift, width);
+    }
+    for (int c = 0; c < n; ++c) store_row(acc[c], x + c * plane + base, col0, width);
+}
+
+// --- the x-update of the EPI ADMM (lfcl/solvers/epi.py): the weighted data term, per pixel ---
+// `weights` are the U x V data-term weights of one lens (repeating from lens to lens); `pattern` the
+// packed Bayer phase (lfcl.layout.packed_pattern). Global size: (W, H).
+
+// out = rho out + A^T W A src  (out holding sum_b K_b^T K_b src)
+__kernel void epi_normal_finish(__global float *out, __global const float *src, __global const float *weights,
+                                const float rho, const int height, const int width, const int pattern)
+{
+    const int col = get_global_id(0), row = get_global_id(1);
+    if (col >= width || row >= height) return;
+    const size_t plane = (size_t)height * width, i = (size_t)row * width + col;
+    const int own = bayer_colour(row, col, pattern);
+    const float w = weights[(row % PITCH_U) * PITCH_V + col % PITCH_V];
+    for (int c = 0; c < 3; ++c)
+        out[c * plane + i] = rho * out[c * plane + i] + (c == own ? w * src[c * plane + i] : 0.0f);
+}
+
+// out = rho out + A^T W b  (out holding sum_b K_b^T (z_b - u_b))
+__kernel void epi_rhs_finish(__global float *out, __global const float *b, __global const float *weights,
+                             const float rho, const int height, const int width, const int pattern)
+{
+    const int col = get_global_id(0), row = get_global_id(1);
+    if (col >= width || row >= height) return;
+    const size_t plane = (size_t)height * width, i = (size_t)row * width + col;
+    const int own = bayer_colour(row, col, pattern);
+    const float w = weights[(row % PITCH_U) * PITCH_V + col % PITCH_V];
+    for (int c = 0; c < 3; ++c)
+        out[c * plane + i] = rho * out[c * plane + i] + (c == own ? w * b[i] : 0.0f);
+}
+
+// out = r / diag(A^T W A + rho K^T K), kdiag = diag(K^T K) [H, W]; 0 where the diagonal is 0.
+__kernel void epi_jacobi(__global const float *r, __global float *out, __global const float *kdiag,
+                         __global const float *weights, const float rho, const int height, const int width,
+                         const int pattern)
+{
+    const int col = get_global_id(0), row = get_global_id(1);
+    if (col >= width || row >= height) return;
+    const size_t plane = (size_t)height * width, i = (size_t)row * width + col;
+    const int own = bayer_colour(row, col, pattern);
+    const float w = weights[(row % PITCH_U) * PITCH_V + col % PITCH_V];
+    for (int c = 0; c < 3; ++c) {
+        const float diagonal = (c == own ? w : 0.0f) + rho * kdiag[i];
+        out[c * plane + i] = diagonal > 0.0f ? r[c * plane + i] / diagonal : 0.0f;
+    }
+}
+
+// partial[row] = sum over the row of w (x[colour] - b)^2 (Kahan-compensated). Global size: (H).
+__kernel void epi_misfit_rows(__global const float *x, __global const float *b, __global const float *weights,
+                              __global float *partial, const int height, const int width, const int pattern)
+{
+    const int row = get_global_id(0);
+    if (row >= height) return;
+    const size_t plane = (size_t)height * width, base = (size_t)row * width;
+    float sum = 0.0f, err = 0.0f;
+    for (int col = 0; col < width; ++col) {
+        const float r = x[bayer_colour(row, col, pattern) * plane + base + col] - b[base + col];
+        const float term = weights[(row % PITCH_U) * PITCH_V + col % PITCH_V] * r * r - err;
+        const float next = sum + term;
+        err = (next - sum) - term;
+        sum = next;
+    }
+    partial[row] = sum;
+}
+
+// The z/u step of one prior block, in place, chunks of 16 floats (shrink.cl's layout):
+//   v = kx + u, z' = S_kappa(v), u' = v - z', kx <- z' - z (dz, for the dual residual),
+// with the chunk sums of the primal residual (kx - z')^2 in primal[k] and of |kx| in l1[k].
+__kernel void epi_zu(__global float *kx, __global float *z, __global float *u, __global float *primal,
+                     __global float *l1, const float kappa, const ulong n, const ulong chunks)
+{
+    const ulong k = get_global_id(0);
+    if (k >= chunks) return;
+    const float16 dx = load_chunk(kx, k, n);
+    const float16 v = dx + load_chunk(u, k, n);
+    const float16 m = fabs(v) - kappa;
+    const float16 z_new = copysign(select(m, (float16)0.0f, m < 0.0f), v);
+    const float16 z_old = load_chunk(z, k, n);
+    store_chunk(z_new, z, k, n);
+    store_chunk(v - z_new, u, k, n);
+    store_chunk(z_new - z_old, kx, k, n);
+    const float16 r = dx - z_new, r2 = r * r, a = fabs(dx);  // the padding lanes are 0 in both
+    primal[k] = ((r2.s0 + r2.s1) + (r2.s2 + r2.s3)) + ((r2.s4 + r2.s5) + (r2.s6 + r2.s7))
+              + ((r2.s8 + r2.s9) + (r2.sa + r2.sb)) + ((r2.sc + r2.sd) + (r2.se + r2.sf));
+    l1[k] = ((a.s0 + a.s1) + (a.s2 + a.s3)) + ((a.s4 + a.s5) + (a.s6 + a.s7))
+          + ((a.s8 + a.s9) + (a.sa + a.sb)) + ((a.sc + a.sd) + (a.se + a.sf));
+}

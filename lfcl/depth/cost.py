@@ -1,0 +1,190 @@
+"""The photo-consistency cost volume of a lenslet mosaic (the heavy part of :mod:`lfcl.depth`).
+
+For centre-view lens ``(s, t)`` and a candidate disparity ``d`` (lenses per view step, HCI's
+sign), view ``(u, v)`` sees the same scene point at the fractional lens
+
+    y = s - d (u - uc),    x = t - d (v - vc),    uc = (U - 1) / 2,  vc = (V - 1) / 2.
+
+Every raw sample of view ``(u, v)`` in the four lenses around ``(y, x)`` is gathered with its
+bilinear weight ``w`` and its *own* CFA colour (no demosaic: a sample is never mixed with a
+neighbour of another colour). Its place in the centre view, relative to lens ``(s, t)``, is
+``p = (s' - y, t' - x)`` (each in (-1, 1)). Per colour ``c`` a plane ``a + g . p`` is fitted by
+weighted least squares (a ridge ``RIDGE * W_c`` on the slope ``g``: at ``d = 0`` all samples sit
+at ``p = 0`` and only the mean is defined); the penalised residual ``RSS_c`` is what is left.
+With Poisson-Gaussian noise of variance ``nv_c = gain * mean_c + floor`` its noise-only
+expectation is ``nv_c (W_c - tr((A_c + R_c)^-1 B_c))`` (``A = sum w phi phi^T``,
+``B = sum w^2 phi phi^T``, ``phi = (1, p_y, p_x)``), so
+
+    excess[d, s, t] = sum_c RSS_c / nv_c - (W_c - tr_c)      (0 in expectation for pure noise)
+    weight[d, s, t] = sum_c W_c
+
+is an unbiased measure of how badly ``d`` explains the samples, in noise units, whatever the
+number of samples of each colour (at odd integer ``d`` every sample that lands on a lens
+shares one row and column parity: one colour only; that colour's fit still counts, with
+its own expectation). A colour with ``W_c < MIN_WEIGHT`` is left out. Samples at or above
+``saturation`` are left out (a clipped sample is no measurement of the radiance).
+
+The plane (``model="plane"``) removes the first-order texture inside the gather footprint, which
+otherwise biases the cost towards integer ``d`` (where the footprint shrinks to one lens);
+``model="mean"`` fits the mean only.
+
+:func:`cost_volume_np` is the float64 reference; :class:`CostVolume` runs ``kernels/depth.cl``.
+Both return ``[2, ND, S, T]`` float32: excess, weight.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..layout import packed_pattern, pattern_channels
+from . import _checks
+
+RIDGE = 0.02
+MIN_WEIGHT = 1.5
+MODELS = {"mean": 0, "plane": 1}
+# Variance floor (normalised units^2) so that a noise model of 0 never divides by 0.
+MIN_VARIANCE = 1e-12
+
+
+def _parse_model(model: str) -> int:
+    if model not in MODELS:
+        raise ValueError(f"unknown cost model {model!r}: choose from {', '.join(MODELS)}")
+    return MODELS[model]
+
+
+def _views(views, U, V) -> tuple[int, int, int, int]:
+    """The gathered views ``(u_lo, u_hi, v_lo, v_hi)``, clipped to the lens; ``ValueError`` if empty."""
+    if views is None:
+        return 0, U - 1, 0, V - 1
+    u_lo, u_hi, v_lo, v_hi = (int(n) for n in views)
+    u_lo, u_hi, v_lo, v_hi = max(u_lo, 0), min(u_hi, U - 1), max(v_lo, 0), min(v_hi, V - 1)
+    if u_lo > u_hi or v_lo > v_hi:
+        raise ValueError(f"views {tuple(views)} select no view of a {U}x{V} lens")
+    return u_lo, u_hi, v_lo, v_hi
+
+
+def _solve_stats(acc, ref, gain, floor, plane: bool):
+    """excess and weight from the per-colour sums ``acc[16, 3, ...]`` of values less ``ref`` (see
+    :func:`cost_volume_np`)."""
+    W, Sy, Sx, Syy, Sxx, Syx, M, My, Mx, X, Q, Qy, Qx, Qyy, Qxx, Qyx = acc
+    keep = W >= MIN_WEIGHT
+    Wsafe = np.where(keep, W, 1.0)
+    mean = M / Wsafe + ref  # the colour's mean value (the sums are of values less ref)
+    nv = np.maximum(gain * np.maximum(mean, 0.0) + floor, MIN_VARIANCE)
+    if plane:
+        r = RIDGE * Wsafe
+        A = np.stack([np.stack([Wsafe, Sy, Sx], -1), np.stack([Sy, Syy + r, Syx], -1),
+                      np.stack([Sx, Syx, Sxx + r], -1)], -2)
+        B = np.stack([np.stack([Q, Qy, Qx], -1), np.stack([Qy, Qyy, Qyx], -1), np.stack([Qx, Qyx, Qxx], -1)], -2)
+        b = np.stack([M, My, Mx], -1)
+        Ainv = np.linalg.inv(A)
+        rss = X - np.einsum("...i,...ij,...j->...", b, Ainv, b)
+        trace = np.einsum("...ij,...ji->...", Ainv, B)
+    else:
+        rss = X - M * M / Wsafe
+        trace = Q / Wsafe
+    excess = np.where(keep, rss / nv - (W - trace), 0.0).sum(axis=0)
+    weight = np.where(keep, W, 0.0).sum(axis=0)
+    return excess, weight
+
+
+def cost_volume_np(mosaic, pattern: str, pitch, disparities, *, origin=(0, 0), noise=(0.0, 1.0),
+                   saturation: float = np.inf, model: str = "plane", views=None) -> np.ndarray:
+    """The cost volume ``[2, ND, S, T]`` (excess, weight; module docstring) in float64, as float32.
+
+    ``mosaic`` [S*U, T*V] (whole lenses), ``pattern`` a Bayer name, ``origin`` the sensor
+    (row, col) of its first pixel, ``disparities`` [ND], ``noise`` ``(gain, floor)`` of the
+    Poisson-Gaussian model ``var = gain * x + floor`` (normalised units), ``views``
+    ``(u_lo, u_hi, v_lo, v_hi)`` (inclusive; None: all) the views gathered.
+    """
+    mosaic = np.asarray(mosaic, dtype=np.float64)
+    U, V, S, T = _checks.grid(mosaic.shape, pitch)
+    plane = bool(_parse_model(model))
+    gain, floor = (float(n) for n in noise)
+    disparities = np.asarray(disparities, dtype=np.float32).astype(np.float64).ravel()
+    # Work on the reference-shifted values exactly as the kernel does (conditioning only).
+    m4 = mosaic.reshape(S, U, T, V)
+    ref = m4[:, U // 2, :, V // 2]
+    cells = pattern_channels(pattern, origin)
+    rows = np.arange(S * U).reshape(S, U) % 2
+    cols = np.arange(T * V).reshape(T, V) % 2
+    uc, vc = (U - 1) / 2.0, (V - 1) / 2.0
+    u_lo, u_hi, v_lo, v_hi = _views(views, U, V)
+    out = np.zeros((2, disparities.size, S, T), np.float64)
+    s_idx, t_idx = np.arange(S), np.arange(T)
+    for k, d in enumerate(disparities):
+        acc = np.zeros((16, 3, S, T))
+        for u in range(u_lo, u_hi + 1):
+            ys = s_idx - np.float32(d) * np.float32(u - uc)  # float32 like the kernel
+            ys = ys.astype(np.float32).astype(np.float64)
+            y0 = np.floor(ys)
+            fy = ys - y0
+            for v in range(v_lo, v_hi + 1):
+                xs = (t_idx - np.float32(d) * np.float32(v - vc)).astype(np.float32).astype(np.float64)
+                x0 = np.floor(xs)
+                fx = xs - x0
+                for a in (0, 1):
+                    sp = (y0 + a).astype(int)
+                    wy = fy if a else 1.0 - fy
+                    py = a - fy
+                    vs = (sp >= 0) & (sp < S) & (wy > 0)
+                    spc = np.clip(sp, 0, S - 1)
+                    for b in (0, 1):
+                        tp = (x0 + b).astype(int)
+                        wx = fx if b else 1.0 - fx
+                        px = b - fx
+                        vt = (tp >= 0) & (tp < T) & (wx > 0)
+                        tpc = np.clip(tp, 0, T - 1)
+                        raw = m4[spc[:, None], u, tpc[None, :], v]
+                        value = raw - ref
+                        w = (wy[:, None] * wx[None, :]) * (vs[:, None] & vt[None, :]) * (raw < saturation)
+                        colour = cells[rows[spc, u][:, None], cols[tpc, v][None, :]]
+                        pyb = np.broadcast_to(py[:, None], w.shape)
+                        pxb = np.broadcast_to(px[None, :], w.shape)
+                        w2 = w * w
+                        feats = (w, w * pyb, w * pxb, w * pyb * pyb, w * pxb * pxb, w * pyb * pxb,
+                                 w * value, w * value * pyb, w * value * pxb, w * value * value,
+                                 w2, w2 * pyb, w2 * pxb, w2 * pyb * pyb, w2 * pxb * pxb, w2 * pyb * pxb)
+                        for c in range(3):
+                            sel = colour == c
+                            for j, f in enumerate(feats):
+                                acc[j, c] += np.where(sel, f, 0.0)
+        out[0, k], out[1, k] = _solve_stats(acc, ref, gain, floor, plane)
+    return out.astype(np.float32)
+
+
+class CostVolume:
+    """The cost volume on the device (``kernels/depth.cl``) for an ``[S*U, T*V]`` mosaic."""
+
+    def __init__(self, runtime, sensor_shape, pattern: str, pitch, disparities, *, origin=(0, 0),
+                 model: str = "plane"):
+        self.runtime = runtime
+        self.U, self.V, self.S, self.T = _checks.grid(tuple(int(n) for n in sensor_shape), pitch)
+        self.sensor_shape = (self.S * self.U, self.T * self.V)
+        self.pattern = packed_pattern(pattern, origin)
+        self.plane = _parse_model(model)
+        self.disparities = np.ascontiguousarray(np.asarray(disparities, dtype=np.float32).ravel())
+        if self.disparities.size < 1 or not np.all(np.isfinite(self.disparities)):
+            raise ValueError("disparities must be a non-empty finite list")
+        self._disparities = runtime.to_device(self.disparities)
+        self.shape = (2, self.disparities.size, self.S, self.T)
+
+    def forward(self, mosaic, noise=(0.0, 1.0), saturation: float = np.inf, views=None, out=None):
+        """``[S*U, T*V]`` float32 device mosaic -> ``[2, ND, S, T]`` float32 device cost volume
+        (``views``: as :func:`cost_volume_np`)."""
+        from ..device import grid_defines
+        from ..ops import check_device_array, output
+
+        check_device_array(mosaic, self.sensor_shape, "mosaic")
+        out = output(self.runtime, out, self.shape)
+        gain, floor = (float(n) for n in noise)
+        sat = np.float32(min(float(saturation), 3.0e38))
+        u_lo, u_hi, v_lo, v_hi = _views(views, self.U, self.V)
+        self.runtime.launch(
+            "depth", "depth_cost", (self.T, self.S, self.disparities.size), mosaic.data, self._disparities.data,
+            out.data, np.int32(self.S), np.int32(self.T), np.int32(self.disparities.size), self.pattern,
+            np.float32(gain), np.float32(floor), sat, np.int32(u_lo), np.int32(u_hi), np.int32(v_lo), np.int32(v_hi),
+            defines=(*grid_defines((self.U, self.V), 0), ("PLANE_MODEL", self.plane),
+                     ("RIDGE_PPM", round(RIDGE * 1e6)), ("MIN_WEIGHT_PPM", round(MIN_WEIGHT * 1e6))),
+        )
+        return out

@@ -1,0 +1,79 @@
+"""The ``depth`` output: ``depth.exr``, ``depth_confidence.exr`` and ``depth.png`` (docs/outputs.md).
+
+``depth.exr``: one float32 channel at lens resolution [S, T], the disparity d in lenses per
+view step, HCI's sign (lfcl/depth/estimate.py). ``depth_confidence.exr``: one channel in [0, 1]
+(0 = unknown). ``depth.png``: an 8-bit preview, the disparity through a matplotlib colour map
+over the range in its metadata (``preview_range``). Every file records units, sign, search
+range and the estimator's options as ``lfcl:`` attributes (lfcl.imageio.write_image); each is
+written atomically (temporary name, then rename).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+COLORMAP = "viridis"
+FILES = ("depth.exr", "depth_confidence.exr", "depth.png")
+
+
+def preview_range(depth) -> tuple[float, float]:
+    """The colour map's range: the 1st..99th percentile of the disparity (a flat map gets +-0.5 about it)."""
+    d = np.asarray(depth.disparity, dtype=np.float64)
+    lo, hi = (float(v) for v in np.percentile(d, [1, 99]))
+    if not hi > lo:
+        lo, hi = lo - 0.5, hi + 0.5
+    return lo, hi
+
+
+def preview(depth, value_range=None) -> np.ndarray:
+    """The colour-mapped disparity ``(S, T, 3)`` float32 in [0, 1] (sRGB-encoded colours of the map)."""
+    from matplotlib import colormaps
+
+    lo, hi = preview_range(depth) if value_range is None else value_range
+    scaled = np.clip((np.asarray(depth.disparity, np.float64) - lo) / (hi - lo), 0.0, 1.0)
+    return np.ascontiguousarray(colormaps[COLORMAP](scaled)[..., :3], dtype=np.float32)
+
+
+def depth_files(depth, metadata: dict | None = None) -> list[tuple[str, np.ndarray, dict]]:
+    """``(name, image, metadata)`` of the three files, nothing written."""
+    base = {**(metadata or {}), "output": "depth", "depth": depth.as_dict()}
+    lo, hi = preview_range(depth)
+    return [
+        ("depth.exr", depth.disparity, {**base, "channel": "disparity d, lenses per view step (one float32 channel)"}),
+        ("depth_confidence.exr", depth.confidence,
+         {**base, "channel": "confidence in [0, 1], 0 = unknown (flat, occluded, saturated; one float32 channel)"}),
+        ("depth.png", preview(depth, (lo, hi)),
+         {**base, "encoding": f"8-bit preview: disparity through matplotlib's {COLORMAP}",
+          "preview_range": [lo, hi], "colormap": COLORMAP}),
+    ]
+
+
+def write_depth(out_dir, depth, metadata: dict | None = None) -> list[Path]:
+    """Write the three files into ``out_dir`` (each atomically); returns their paths."""
+    from ..imageio import write_image
+
+    out_dir = Path(out_dir)
+    return [write_image(out_dir / name, image, meta) for name, image, meta in depth_files(depth, metadata)]
+
+
+def depth_from_mosaic(mosaic, geometry: dict, device=None, **options):
+    """The disparity map of a decoded raw (:class:`lfcl.raw.Mosaic`) on the pipeline's lens grid.
+
+    ``geometry`` is the Grid stage's ``metadata["geometry"]``: an ``aligned-square`` grid (``pitch``,
+    ``lenses``, ``first_lens_pixel``); other grids are refused (``ValueError``). The noise model is
+    the raw's NoiseProfile where it has one, else estimated from the raw.
+    """
+    if geometry.get("grid") != "aligned-square":
+        raise ValueError(f"the depth output needs an aligned square lens grid; this one is {geometry.get('grid')!r} "
+                         "(rotated, non-integer-pitch and hexagonal grids are not supported yet)")
+    from ..noise import from_noise_profile
+    from .estimate import estimate_disparity
+
+    U, V = (int(p) for p in geometry["pitch"])
+    S, T = (int(n) for n in geometry["lenses"])
+    r0, c0 = (int(n) for n in geometry.get("first_lens_pixel", (0, 0)))
+    data = np.asarray(mosaic.data)[r0:r0 + S * U, c0:c0 + T * V]
+    noise = None if mosaic.noise_profile is None else from_noise_profile(mosaic.noise_profile, data)
+    return estimate_disparity(data, mosaic.pattern, (U, V), origin=(r0, c0), noise=noise, device=device, **options)

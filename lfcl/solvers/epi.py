@@ -1,0 +1,383 @@
+"""ADMM with the prior along the epipolar lines (``admm-epi``) on an OpenCL device, and its float64 twin.
+
+    min_x 1/2 ||W^(1/2) (A x - b)||^2 + lam ||D_epi(d, w) x||_1 + lam_fb ||D_epi(0, 1 - w) x||_1
+
+``A`` the CFA sampling (the data term stays exact: A on the true sensor samples), ``D_epi(d, w)``
+the confidence-weighted differences along each sample's epipolar line (lfcl/ops/epi.py), and the
+fall-back term ``D_epi(0, 1 - w) = (1 - w) D_uv``: (u, v) differences where the disparity is not
+trusted (occlusions, textureless or non-Lambertian lenses), 0 where the confidence is 1.
+
+Scaled-form ADMM over the stacked blocks ``K = [K_epi; K_fb]``, each with its own threshold:
+
+    x <- (A^T W A + rho K^T K)^{-1} (A^T W b + rho K^T (z - u))   Jacobi-PCG, warm-started
+    z <- S_{lam_b / rho}(K_b x + u_b)                              per block
+    u <- u + K x - z
+
+``A^T W A + rho K^T K`` couples neighbouring lenses, so the x-update is the shared
+Jacobi-preconditioned CG (lfcl/solvers/cg.py) with ``diag(K^T K)`` from the operator's gather
+(EpiGradient.diagonal). Everything runs on the device; the host sees only the reductions (CG's
+scalars and one wait per iteration for the history). The history records and the stop rule are those
+of lfcl/solvers/admm.py (AdmmParams, IterationRecord, stop_reason): lam is ``params.lam``, lam_fb comes
+with the disparity in :class:`EpiPrior`.
+
+This is a solver beside :class:`lfcl.solvers.admm.AdmmSolver` rather than a mode of it because that
+solver's kernels fuse D over the (u, v, s, t) stencils into the normal operator, the right-hand side
+and the z/u step (and the exact per-lens x-update); the EPI prior is a gather with per-sample taps.
+The pieces are shared: CG, reductions, vector ops, params, records, the stop rule and the reference's
+generic ADMM core (:func:`lfcl.solvers.reference.admm_operators`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import scipy.sparse
+
+from ..device import grid_defines
+from ..layout import packed_pattern
+from ..ops import check_device_array
+from ..ops.cfa import cfa_adjoint_np, cfa_sample_np
+from ..ops.epi import EpiGradient, check_maps, epi_matrix_np
+from ..ops.linalg import VectorOps, elementwise_size
+from ..ops.reduce import Reductions
+from .cg import preconditioned_cg
+from .params import AdmmParams, AdmmResult, IterationRecord, stop_reason
+from .reference import admm_operators
+
+
+@dataclasses.dataclass(frozen=True)
+class EpiPrior:
+    """The prior's lens maps and the fall-back weight.
+
+    disparity:  [S, T] lenses per view step (lfcl/ops/epi.py for the sign).
+    confidence: [S, T] in [0, 1], weighting the EPI differences (None: 1 everywhere).
+    lam_fb:     weight of the fall-back term lam_fb ||(1 - w) D_uv x||_1 (0: none; it also
+                vanishes where the confidence is 1).
+    """
+
+    disparity: np.ndarray
+    confidence: np.ndarray | None = None
+    lam_fb: float = 0.0
+
+    def __post_init__(self):
+        if not (isinstance(self.lam_fb, (int, float)) and math.isfinite(self.lam_fb) and self.lam_fb >= 0):
+            raise ValueError(f"lam_fb must be a finite number >= 0, got {self.lam_fb!r}")
+
+    def maps(self, lenses) -> tuple[np.ndarray, np.ndarray]:
+        return check_maps(self.disparity, self.confidence, lenses)
+
+    def has_fallback(self, lenses) -> bool:
+        return self.lam_fb > 0 and bool(np.any(self.maps(lenses)[1] < 1))
+
+
+@dataclasses.dataclass(frozen=True)
+class EpiSetting:
+    """admm-epi's parameters at one noise level (a row of :data:`EPI_SCHEDULE`)."""
+
+    sigma: float  # the training captures' noise level (rms per raw pixel, normalised units)
+    lam_per_sigma: float  # lam = lam_per_sigma * sigma
+    fb_per_lam: float  # lam_fb = fb_per_lam * lam
+    iterations: int
+    start: str  # the first estimate (lfcl.methods.demosaic_lightfield's ``start``)
+
+
+#: admm-epi's defaults by noise level, fitted by research/fit_epi.py on training seeds (docs/admm.md,
+#: "admm-epi"); rows by increasing sigma. Between rows :func:`epi_setting` interpolates lam_per_sigma,
+#: fb_per_lam and the iterations in log sigma and takes the start of the nearer row; outside, the end row's.
+EPI_SCHEDULE = (
+    EpiSetting(sigma=1e-3, lam_per_sigma=0.3, fb_per_lam=1.0, iterations=20, start="malvar"),
+)
+
+#: lfcl.depth.estimate_disparity's options for admm-epi (its own defaults otherwise; docs/admm.md, "admm-epi").
+EPI_DEPTH_OPTIONS: dict = {}
+
+
+def epi_setting(sigma: float, schedule=EPI_SCHEDULE) -> EpiSetting:
+    """admm-epi's parameters at noise level ``sigma`` (:data:`EPI_SCHEDULE`)."""
+    if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma > 0):
+        raise ValueError(f"sigma must be a finite number > 0, got {sigma!r}")
+    rows = sorted(schedule, key=lambda r: r.sigma)
+    if not rows:
+        raise ValueError("the schedule is empty")
+    if sigma <= rows[0].sigma:
+        return dataclasses.replace(rows[0], sigma=float(sigma))
+    if sigma >= rows[-1].sigma:
+        return dataclasses.replace(rows[-1], sigma=float(sigma))
+    hi = next(i for i, r in enumerate(rows) if r.sigma >= sigma)
+    a, b = rows[hi - 1], rows[hi]
+    t = (math.log(sigma) - math.log(a.sigma)) / (math.log(b.sigma) - math.log(a.sigma))
+    return EpiSetting(sigma=float(sigma), lam_per_sigma=(1 - t) * a.lam_per_sigma + t * b.lam_per_sigma,
+                      fb_per_lam=(1 - t) * a.fb_per_lam + t * b.fb_per_lam,
+                      iterations=int(round((1 - t) * a.iterations + t * b.iterations)),
+                      start=a.start if t < 0.5 else b.start)
+
+
+def epi_params(params: AdmmParams, sigma: float, *, lam=None, iterations=None, strength: float = 1.0
+               ) -> tuple[AdmmParams, float]:
+    """``params`` (lfcl.methods.admm_params's for admm-epi) with lam and the iteration count of
+    :func:`epi_setting` at ``sigma`` where they were not given explicitly, and lam_fb."""
+    setting = epi_setting(max(float(sigma), 1e-6))
+    if lam is None:
+        params = dataclasses.replace(params, lam=strength * setting.lam_per_sigma * max(float(sigma), 1e-6))
+    if iterations is None and params.change_tol == 0:
+        params = dataclasses.replace(params, max_iter=setting.iterations)
+    return params, setting.fb_per_lam * params.lam
+
+
+def _check_params(params: AdmmParams):
+    if params.lam_xc > 0:
+        raise ValueError("admm-epi has no cross-channel block: lam_xc must be 0")
+    if params.x_update == "lens":
+        raise ValueError("x_update 'lens' needs the (u, v) prior; the EPI prior couples lenses (use 'cg' or 'auto')")
+
+
+def epi_solver_bytes(sensor_shape, fallback: bool) -> int:
+    """Device memory an EpiAdmmSolver.solve needs, with its start and mosaic (bytes)."""
+    H, W = (int(n) for n in sensor_shape)
+    planes = 3 * H * W
+    blocks = 2 if fallback else 1
+    # planes: the start, x, previous x, rhs, 4 CG vectors; K x scratch (2 planes); z, u per block (2 x 2 planes);
+    # per block the rays (d, w per sample); the mosaic and diag(K^T K)
+    floats = 8 * planes + 2 * planes + blocks * (4 * planes + 2 * H * W) + 2 * H * W
+    return 4 * floats
+
+
+class EpiAdmmSolver:
+    """ADMM with the EPI prior for one sensor size, Bayer phase and lens pitch (build once, solve many)."""
+
+    def __init__(self, runtime, sensor_shape, pattern: str, pitch, origin=(0, 0)):
+        self.runtime = runtime
+        self.height, self.width = (int(n) for n in sensor_shape)
+        self.U, self.V = (int(p) for p in pitch)
+        if self.height % self.U or self.width % self.V:
+            raise ValueError(f"sensor {self.height}x{self.width} is not a whole number of {self.U}x{self.V} lenses")
+        self.lenses = (self.height // self.U, self.width // self.V)
+        self.planes_shape = (3, self.height, self.width)
+        self.pattern, self.origin = pattern, origin
+        self._pattern = packed_pattern(pattern, origin)
+        self._defines = grid_defines((self.U, self.V), 3)
+        self.epi = EpiGradient(runtime, self.planes_shape, (self.U, self.V))
+        self.fallback = EpiGradient(runtime, self.planes_shape, (self.U, self.V))  # d = 0, weights 1 - w
+        self.vectors = VectorOps(runtime)
+        self.reduce = Reductions(runtime)
+        self._rhs, self._x_prev = runtime.empty(self.planes_shape), runtime.empty(self.planes_shape)
+        self._cg = [runtime.empty(self.planes_shape) for _ in range(4)]
+        self._scratch = runtime.empty(self.epi.gradient_shape)  # K_b x, z - u, dz
+        self._kdiag = runtime.empty((self.height, self.width))
+        self._state: list = []  # (z, u) per block
+        n = self._scratch.size
+        self._chunks = -(-n // 16)
+        self._primal_part, self._l1_part = runtime.empty(self._chunks), runtime.empty(self._chunks)
+        self._misfit_rows = runtime.empty(self.height)
+        self._weights = runtime.to_device(np.ones(self.U * self.V, np.float32))
+        self.blocks: list[tuple[EpiGradient, float]] = []
+
+    def set_lens_weights(self, lens_weights=None):
+        """Data-term weights [U, V] of every lens (None: ones); see AdmmSolver.set_lens_weights."""
+        if lens_weights is None:
+            weights = np.ones((self.U, self.V), np.float32)
+        else:
+            weights = np.asarray(lens_weights, dtype=np.float32)
+            if weights.shape != (self.U, self.V) or not np.all(np.isfinite(weights)) or np.any(weights < 0):
+                raise ValueError(f"lens weights must be a finite, non-negative {self.U}x{self.V} array, "
+                                 f"got shape {weights.shape}")
+        self._weights.set(np.ascontiguousarray(weights.ravel()))
+
+    def prepare(self, params: AdmmParams, prior: EpiPrior, lens_weights=None):
+        """Upload the maps and weights, build diag(K^T K) and the blocks (op, lam) for ``params``."""
+        _check_params(params)
+        self.set_lens_weights(lens_weights)
+        disparity, confidence = prior.maps(self.lenses)
+        self.epi.set_maps(disparity, confidence)
+        self.blocks = [(self.epi, params.lam)]
+        if prior.has_fallback(self.lenses):
+            self.fallback.set_maps(np.zeros_like(disparity), 1 - confidence)
+            self.blocks.append((self.fallback, prior.lam_fb))
+        while len(self._state) < len(self.blocks):
+            shape = self.epi.gradient_shape
+            self._state.append((self.runtime.empty(shape), self.runtime.empty(shape)))
+        for i, (op, _) in enumerate(self.blocks):
+            op.diagonal(self._kdiag, accumulate=i > 0)
+
+    def _pixelwise(self, kernel, *args):
+        self.runtime.launch("epi", kernel, (self.width, self.height), *args, defines=self._defines)
+
+    def normal(self, src, out, rho):
+        """out = (A^T W A + rho K^T K) src."""
+        for i, (op, _) in enumerate(self.blocks):
+            op.adjoint(op.forward(src, self._scratch), out, accumulate=i > 0)
+        self._pixelwise("epi_normal_finish", out.data, src.data, self._weights.data, np.float32(rho),
+                        np.int32(self.height), np.int32(self.width), self._pattern)
+        return out
+
+    def precondition(self, r, out, rho):
+        """out = r / diag(A^T W A + rho K^T K)."""
+        self._pixelwise("epi_jacobi", r.data, out.data, self._kdiag.data, self._weights.data, np.float32(rho),
+                        np.int32(self.height), np.int32(self.width), self._pattern)
+        return out
+
+    def right_hand_side(self, b, out, rho):
+        """out = A^T W b + rho K^T (z - u)."""
+        for i, ((op, _), (z, u)) in enumerate(zip(self.blocks, self._state)):
+            self.vectors.axpby(1.0, z, -1.0, u, self._scratch)
+            op.adjoint(self._scratch, out, accumulate=i > 0)
+        self._pixelwise("epi_rhs_finish", out.data, b.data, self._weights.data, np.float32(rho),
+                        np.int32(self.height), np.int32(self.width), self._pattern)
+        return out
+
+    def start(self, x):
+        """z = K x, u = 0."""
+        for (op, _), (z, u) in zip(self.blocks, self._state):
+            op.forward(x, z)
+            u.fill(0)
+
+    def solve(self, b, x0, params: AdmmParams, prior: EpiPrior, callback=None, lens_weights=None) -> AdmmResult:
+        """Run ADMM on mosaic ``b`` [H, W] from ``x0`` [3, H, W] (float32 device arrays; x0 is not modified).
+
+        ``callback(record, x)`` after every iteration; ``lens_weights`` [U, V] weight the data term.
+        """
+        check_device_array(b, (self.height, self.width), "b")
+        check_device_array(x0, self.planes_shape, "x0")
+        self.prepare(params, prior, lens_weights)
+        x = x0.copy()
+        self.start(x)
+        history: list[IterationRecord] = []
+        reason = self.iterate(b, x, params, history, callback=callback)
+        return AdmmResult(x=x, history=history, stop_reason=reason)
+
+    def iterate(self, b, x, params: AdmmParams, history: list, callback=None) -> str:
+        rho, vec, red = params.rho, self.vectors, self.reduce
+        n_z = sum(z.size for z, _ in self._state[:len(self.blocks)])
+        size = elementwise_size(self._scratch.size)
+        while True:
+            vec.copy(x, self._x_prev)
+            self.right_hand_side(b, self._rhs, rho)
+            steps = preconditioned_cg(vec, red, lambda src, out: self.normal(src, out, rho),
+                                      lambda src, out: self.precondition(src, out, rho), x, self._rhs, self._cg,
+                                      params.cg_steps, params.cg_tol)
+            dual = self._cg[0]  # CG's residual buffer is free until the next x-update
+            slot = 0
+            red.enqueue(slot, "diff_norm2", x, self._x_prev)
+            for i, ((op, lam), (z, u)) in enumerate(zip(self.blocks, self._state)):
+                op.forward(x, self._scratch)
+                self.runtime.launch("epi", "epi_zu", size, self._scratch.data, z.data, u.data, self._primal_part.data,
+                                    self._l1_part.data, np.float32(lam / rho), np.uint64(self._scratch.size),
+                                    np.uint64(self._chunks), defines=self._defines)
+                red.enqueue(slot + 1, "sum", self._primal_part)
+                red.enqueue(slot + 2, "sum", self._l1_part)
+                slot += 2
+                op.adjoint(self._scratch, dual, accumulate=i > 0)  # K^T (z - z_prev)
+            red.enqueue(slot + 1, "norm2", dual)
+            self.runtime.launch("epi", "epi_misfit_rows", (self.height,), x.data, b.data, self._weights.data,
+                                self._misfit_rows.data, np.int32(self.height), np.int32(self.width), self._pattern,
+                                defines=self._defines)
+            red.enqueue(slot + 2, "sum", self._misfit_rows)
+            self.runtime.queue.finish()
+            sums = red.collect([True] * (slot + 3))
+            change2, dual2, misfit2 = sums[0], sums[slot + 1], sums[slot + 2]
+            primal2 = sum(sums[1:slot + 1:2])
+            prior = sum(lam * l1 for (_, lam), l1 in zip(self.blocks, sums[2:slot + 1:2]))
+            record = IterationRecord(
+                iteration=len(history) + 1,
+                objective=0.5 * misfit2 + prior,
+                primal_residual=math.sqrt(primal2),
+                dual_residual=rho * math.sqrt(dual2),
+                rms_change=math.sqrt(change2 / x.size),
+                cg_steps=steps,
+            )
+            history.append(record)
+            if callback is not None:
+                callback(record, x)
+            primal_scale = dual_scale = 0.0
+            if params.abs_tol > 0 or params.rel_tol > 0:
+                kx2 = z2 = 0.0
+                for i, ((op, _), (z, u)) in enumerate(zip(self.blocks, self._state)):
+                    kx2 += red.norm2(op.forward(x, self._scratch))
+                    z2 += red.norm2(z)
+                    op.adjoint(u, dual, accumulate=i > 0)
+                primal_scale = math.sqrt(max(kx2, z2))
+                dual_scale = rho * math.sqrt(red.norm2(dual))
+            reason = stop_reason(params, record, primal_scale, dual_scale, n_z, x.size)
+            if reason:
+                return reason
+
+
+def admm_epi_reference(b, pattern, pitch, params: AdmmParams, x0, prior: EpiPrior, origin=(0, 0),
+                       lens_weights=None) -> AdmmResult:
+    """The float64 twin of :class:`EpiAdmmSolver`: the same problem and updates through
+    :func:`lfcl.solvers.reference.admm_operators`, with K the stacked sparse matrices."""
+    _check_params(params)
+    b = np.asarray(b, dtype=np.float64)
+    U, V = pitch
+    H, W = b.shape
+    lenses = (H // U, W // V)
+    disparity, confidence = prior.maps(lenses)
+    lens_w = np.ones((U, V)) if lens_weights is None else np.asarray(lens_weights, dtype=np.float64)
+    w = np.tile(lens_w, lenses)
+    blocks = [epi_matrix_np(disparity, pitch, confidence)]
+    lams = [params.lam]
+    if prior.has_fallback(lenses):
+        blocks.append(epi_matrix_np(np.zeros_like(disparity), pitch, 1 - confidence))
+        lams.append(prior.lam_fb)
+    K = scipy.sparse.vstack(blocks).tocsr()
+    KT = K.T.tocsr()
+    kdiag = np.asarray(K.multiply(K).sum(axis=0)).reshape(H, W)
+    # per-entry weights carry both thresholds (lam_b / rho with params.lam = 1), as the cross-channel reference does
+    prior_weights = np.concatenate([np.full(m.shape[0], lam) for m, lam in zip(blocks, lams)])[None, :]
+    return admm_operators(
+        b, x0, dataclasses.replace(params, lam=1.0), w,
+        forward=lambda v: cfa_sample_np(v, pattern, origin),
+        adjoint=lambda r: cfa_adjoint_np(r, pattern, origin),
+        prior=lambda v: (K @ v.reshape(3, H * W).T).T,
+        prior_adjoint=lambda z: (KT @ z.T).T.reshape(3, H, W),
+        diagonal=cfa_adjoint_np(w, pattern, origin) + params.rho * kdiag[None],
+        prior_weights=prior_weights,
+    )
+
+
+def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: AdmmParams, lam_fb: float, noise,
+                 device=None, lens_weights=None, callback=None, max_memory: int | None = None,
+                 depth_options: dict | None = None) -> tuple[np.ndarray, dict, AdmmResult]:
+    """``admm-epi`` of lfcl.methods.demosaic_lightfield: estimate the disparity from the raw
+    (lfcl.depth.estimate_disparity), then solve from the start ``x0`` (device arrays ``b``, ``x0``).
+
+    Returns the planes [3, H, W] on the host, the parameters to record (the disparity's
+    statistics, lam_fb) and the solver's result (its x is dropped).
+    """
+    import time
+
+    from ..depth import estimate_disparity
+
+    H, W = b.shape
+    began = time.perf_counter()
+    depth = estimate_disparity(raw_mosaic, pattern, pitch, origin=origin, noise=noise, device=device,
+                               **(depth_options or {}))
+    depth_seconds = time.perf_counter() - began
+    prior = EpiPrior(depth.disparity, depth.confidence, lam_fb=float(lam_fb))
+    lenses = (H // int(pitch[0]), W // int(pitch[1]))
+    budget = int(max_memory) if max_memory is not None else int(0.8 * runtime.device.global_mem_size)
+    needed = epi_solver_bytes((H, W), prior.has_fallback(lenses))
+    if needed > budget or 4 * 6 * H * W > runtime.device.max_mem_alloc_size:
+        raise ValueError(f"admm-epi on a {H}x{W} sensor needs about {needed / 2**30:.1f} GiB of device memory but "
+                         f"{runtime.name} allows {budget / 2**30:.1f} GiB; its prior couples neighbouring lenses, "
+                         "so it does not run in bands: use admm-uv, a crop, or a larger device")
+    solver = EpiAdmmSolver(runtime, (H, W), pattern, pitch, origin)
+    result = solver.solve(b, x0, params, prior, callback=callback, lens_weights=lens_weights)
+    planes = result.x.get()
+    if not np.all(np.isfinite(planes)):
+        raise FloatingPointError("admm-epi produced NaN/Inf values; try a smaller lambda or rho")
+    d, w = depth.disparity, depth.confidence
+    parameters = {
+        "lam_fb": float(lam_fb),
+        "fallback_block": prior.has_fallback(lenses),
+        "disparity": {
+            "units": "lenses per view step", "min": float(d.min()), "max": float(d.max()),
+            "mean": float(d.mean()), "median": float(np.median(d)), "std": float(d.std()),
+            "confidence_mean": float(w.mean()), "confident_share": float(np.mean(w >= 0.5)),
+            "search_range": [-depth.dmax, depth.dmax], "step": depth.step, "seconds": depth_seconds,
+            "lookup": "d and confidence read at the lens the ray sees in the centre view",
+        },
+    }
+    return planes, parameters, dataclasses.replace(result, x=None)

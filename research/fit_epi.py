@@ -1,0 +1,277 @@
+"""Fit and measure ``admm-epi`` (lfcl/solvers/epi.py): the schedule in lfcl/solvers/epi.py EPI_SCHEDULE (used by
+lfcl/methods.py for ADMM_DEFAULTS["admm-epi"]) and the table in docs/admm.md ("admm-epi: the prior along the
+epipolar lines"). Not shipped in the wheel.
+
+    python research/fit_epi.py trace --seeds 1,2 --c 0.1,0.2,0.4,0.8 -o research/fit_epi_trace.json
+    python research/fit_epi.py fit research/fit_epi_trace.json
+    python research/fit_epi.py table --seeds 5,6 --real -o research/fit_epi_table.json
+
+``trace``: for a grid of lam = c sigma (lam_fb = f lam, rho, CG steps), starts (malvar, linear4d, guarded) and
+disparities (``estimated``: lfcl.depth.estimate_disparity's defaults; ``noocc``: the same without the half-aperture
+occlusion handling; ``truth``: the scene's own, lfcl.sim.scenes.render_disparity, confidence 1, for comparison
+only), the PSNR (centre view, mean image, against the noise-free truth; without and with the lens safety net)
+after every iteration. The noise is estimated from the raw, as ``lfcl process`` does. ``fit``: per light level
+(training sigma), the rule (c, f, start, iterations or stop at rms change <= r sigma) with the best mean gain over
+Malvar (centre view and mean image, net on) among rules that never lose to Malvar. ``table``: admm-epi with its
+defaults and the other methods on held-out seeds (and the real light fields), seconds, with and without the net.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import itertools
+import json
+import time
+
+import numpy as np
+
+from lfcl.device import get_runtime
+from lfcl.evaluate import simulated_capture
+from lfcl.layout import LightFieldShape, planes_to_exchange
+from lfcl.methods import demosaic_lightfield
+from lfcl.metrics import lightfield_scores
+from lfcl.noise import estimate_noise
+from lfcl.ops.malvar import Malvar
+from lfcl.safety_net import apply_safety_net
+from lfcl.solvers.epi import EPI_SCHEDULE, EpiAdmmSolver, EpiPrior
+from lfcl.solvers.params import AdmmParams
+
+REAL = {"antinous": "../shared/realdata/hci_epinet/antinous", "lytro2067": "../shared/realdata/lytro_epinet/2067"}
+OTHERS = ("malvar", "linear4d", "admm-uv", "admm-uvst", "admm-uv-xc")
+
+
+def capture(scene, seed, lux, lenses):
+    if scene in REAL:
+        return simulated_capture(lenses, lux, seed, lightfield=REAL[scene])
+    return simulated_capture(lenses, lux, seed, scene)
+
+
+def scores(planes, truth) -> dict:
+    return lightfield_scores(planes_to_exchange(planes, LightFieldShape.from_exchange(truth)), truth)
+
+
+@dataclasses.dataclass
+class Depth:
+    disparity: np.ndarray
+    confidence: np.ndarray | None
+
+
+def depth_for(kind, cap, noise, scene, seed, lenses) -> tuple[Depth, dict]:
+    from lfcl.depth import badpix, estimate_disparity
+    from lfcl.sim.scenes import render_disparity
+
+    gt = np.nan_to_num(render_disparity(scene, lenses, seed, cap.pitch))
+    if kind == "truth":
+        return Depth(gt, None), {"source": "truth", "seconds": 0.0}
+    began = time.perf_counter()
+    est = estimate_disparity(cap.mosaic, cap.pattern, cap.pitch, noise=noise, occlusion=kind != "noocc")
+    seconds = time.perf_counter() - began
+    return Depth(est.disparity, est.confidence), {
+        "source": kind, "seconds": seconds, "badpix_0.1": float(badpix(est.disparity, gt, 0.1)),
+        "badpix_0.1_confident": float(badpix(est.disparity[est.confidence >= 0.5], gt[est.confidence >= 0.5], 0.1))
+        if np.any(est.confidence >= 0.5) else None, "confidence_mean": float(est.confidence.mean())}
+
+
+def start_for(kind, runtime, cap, b, noise):
+    malvar = Malvar(runtime, cap.mosaic.shape, cap.pattern).forward(b)
+    if kind == "malvar":
+        return malvar
+    from lfcl.ops.linear4d import linear4d_operator
+
+    x0 = linear4d_operator(runtime, cap.mosaic, cap.pattern, cap.pitch, (0, 0), noise).forward(b)
+    if kind == "guarded":
+        from lfcl.guarded_start import guarded_start
+
+        x0, _ = guarded_start(runtime, x0, malvar, b, cap.pitch, noise)
+    return x0
+
+
+def run_trace(args):
+    lenses = (args.lenses, args.lenses)
+    runtime = get_runtime()
+    out = []
+    for scene, seed, lux in itertools.product(args.scenes, args.seeds, args.lux):
+        cap = capture(scene, seed, lux, args.lenses)
+        noise = estimate_noise(cap.mosaic, cap.pattern, cap.pitch)
+        base = scores(demosaic_lightfield(cap.mosaic, cap.pattern, cap.pitch, "malvar").planes, cap.truth)
+        b = runtime.to_device(cap.mosaic)
+        solver = EpiAdmmSolver(runtime, cap.mosaic.shape, cap.pattern, cap.pitch)
+        for depth_kind in args.depth:
+            depth, depth_meta = depth_for(depth_kind, cap, noise, scene, seed, lenses)
+            for start in args.starts:
+                x0 = start_for(start, runtime, cap, b, noise)
+                start_scores = scores(x0.get(), cap.truth)
+                for c, f, rho, cg in itertools.product(args.c, args.f, args.rho, args.cg):
+                    began = time.perf_counter()
+                    params = AdmmParams(lam=c * noise.sigma, rho=rho, max_iter=args.iterations, cg_steps=cg)
+                    prior = EpiPrior(depth.disparity, depth.confidence, lam_fb=f * c * noise.sigma)
+                    rows = []
+
+                    def record(rec, x):
+                        planes = x.get()
+                        net, _ = apply_safety_net(runtime, planes, cap.mosaic, cap.pattern, cap.pitch, (0, 0), noise)
+                        s, sn = scores(planes, cap.truth), scores(net, cap.truth)
+                        rows.append({"iteration": rec.iteration, "rms_change_sigma": rec.rms_change / noise.sigma,
+                                     **s, "psnr_center_net": sn["psnr_center"], "psnr_mean_net": sn["psnr_mean"]})
+
+                    solver.solve(b, x0, params, prior, callback=record)
+                    best = max(rows, key=lambda r: r["psnr_center_net"])
+                    print(f"{scene} s{seed} {lux:4g} lux sigma={noise.sigma:.2e} {depth_kind} {start} c={c:g} f={f:g} "
+                          f"rho={rho:g} cg={cg}: malvar {base['psnr_center']:.2f}/{base['psnr_mean']:.2f}, start "
+                          f"{start_scores['psnr_center']:.2f}/{start_scores['psnr_mean']:.2f}, best centre (net) "
+                          f"{best['psnr_center_net']:.2f} at {best['iteration']} (mean {best['psnr_mean_net']:.2f}), "
+                          f"last {rows[-1]['psnr_center_net']:.2f}/{rows[-1]['psnr_mean_net']:.2f} "
+                          f"[{time.perf_counter() - began:.1f} s] {json.dumps(depth_meta)}", flush=True)
+                    out.append({"scene": scene, "seed": seed, "lux": lux, "sigma": noise.sigma, "depth": depth_kind,
+                                "start": start, "c": c, "f": f, "rho": rho, "cg_steps": cg, "malvar": base,
+                                "start_scores": start_scores, "depth_meta": depth_meta, "trace": rows})
+    return out
+
+
+STOPS = [f"K={k}" for k in (1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 20, 25, 30)] + \
+    [f"change<={r:g}" for r in (0.02, 0.05, 0.1, 0.2, 0.3, 0.5)]
+
+
+def pick(trace: list[dict], stop: str) -> dict:
+    """The iteration a stop rule ends at (the last traced if it never fires)."""
+    if stop.startswith("K="):
+        return trace[min(int(stop[2:]), len(trace)) - 1]
+    ratio = float(stop.split("<=")[1])
+    hit = [row for row in trace if row["iteration"] > 1 and row["rms_change_sigma"] <= ratio]
+    return hit[0] if hit else trace[-1]
+
+
+def rule_scores(runs: list[dict], stop: str, net=True) -> dict:
+    sfx = "_net" if net else ""
+    picks = [pick(r["trace"], stop) for r in runs]
+    centre = [p["psnr_center" + sfx] - r["malvar"]["psnr_center"] for p, r in zip(picks, runs)]
+    mean = [p["psnr_mean" + sfx] - r["malvar"]["psnr_mean"] for p, r in zip(picks, runs)]
+    return {"stop": stop, "worst_centre": min(centre), "worst_mean": min(mean), "mean_centre": float(np.mean(centre)),
+            "mean_mean": float(np.mean(mean)), "iterations": [p["iteration"] for p in picks]}
+
+
+def run_fit(args):
+    """Per light level: the best (depth, start, c, f, rho, cg, stop) rule over the traced training captures."""
+    results = []
+    for path in args.inputs:
+        results += json.load(open(path))["results"]
+    by_lux: dict = {}
+    for r in results:
+        by_lux.setdefault(r["lux"], []).append(r)
+    fitted = []
+    for lux in sorted(by_lux):
+        groups: dict = {}
+        for r in by_lux[lux]:
+            groups.setdefault((r["depth"], r["start"], r["c"], r["f"], r["rho"], r["cg_steps"]), []).append(r)
+        n = max(len(g) for g in groups.values())
+        rules = []
+        for key, runs in groups.items():
+            if len(runs) < n:
+                continue
+            for stop in STOPS:
+                s = rule_scores(runs, stop)
+                # the score: mean of centre and mean-image gains; a rule may lose to Malvar on no capture
+                s["score"] = 0.5 * (s["mean_centre"] + s["mean_mean"]) if min(s["worst_centre"], s["worst_mean"]) > 0 \
+                    else -1e9 + min(s["worst_centre"], s["worst_mean"])
+                rules.append({"depth": key[0], "start": key[1], "c": key[2], "f": key[3], "rho": key[4],
+                              "cg_steps": key[5], **s})
+        rules.sort(key=lambda x: -x["score"])
+        sig = float(np.median([r["sigma"] for r in by_lux[lux]]))
+        print(f"lux {lux:g} (median sigma {sig:.3e}, {n} captures): best rules")
+        for rule in rules[:args.top]:
+            print("  ", {k: (round(v, 3) if isinstance(v, float) else v) for k, v in rule.items()})
+        fitted.append({"lux": lux, "sigma": sig, "rules": rules[:args.top]})
+    return fitted
+
+
+def run_table(args):
+    rows = []
+    scenes = [(s, seed) for s in args.scenes for seed in args.seeds] + \
+        ([(name, 0) for name in REAL] if args.real else [])
+    for (scene, seed), lux in itertools.product(scenes, args.lux):
+        cap = capture(scene, seed, lux, args.lenses)
+        for method in args.methods:
+            for net in (False, True) if method != "malvar" else (False,):
+                began = time.perf_counter()
+                result = demosaic_lightfield(cap.mosaic, cap.pattern, cap.pitch, method, safety_net=net)
+                seconds = time.perf_counter() - began
+                row = {"scene": scene, "seed": seed, "lux": lux, "method": method, "net": net, "seconds": seconds,
+                       "iterations": result.iterations, **scores(result.planes, cap.truth)}
+                if method == "admm-epi":
+                    row["disparity"] = result.parameters["disparity"]
+                    row["lam_per_sigma"] = result.parameters["lam"] / result.noise.sigma
+                print(json.dumps({k: v for k, v in row.items() if k != "disparity"}), flush=True)
+                rows.append(row)
+    return rows
+
+
+def format_table(rows: list[dict], net: bool) -> str:
+    """The markdown table of docs/admm.md: centre / mean PSNR per method, epi - malvar, epi - best other, s."""
+    cell = {(r["scene"], r["seed"], r["lux"], r["method"]): r for r in rows if r["net"] == net or r["method"] == "malvar"}
+    methods = [m for m in OTHERS if any(k[3] == m for k in cell)]
+    keys = sorted({k[:3] for k in cell}, key=lambda k: (k[0], k[1], k[2]))
+    head = "| scene | seed | lux | " + " | ".join(methods) + " | admm-epi | epi - malvar | epi - best other | " \
+        "epi s | uv s | uvst s |"
+    lines = [head, "|---" * head.count("|")[:-1] if False else "|---" * (head.count("|") - 1) + "|"]
+    for k in keys:
+        if (*k, "admm-epi") not in cell:
+            continue
+        e = cell[(*k, "admm-epi")]
+        m = cell[(*k, "malvar")]
+        others = [cell[(*k, x)] for x in methods]
+        bc = max(o["psnr_center"] for o in others)
+        bm = max(o["psnr_mean"] for o in others)
+        lines.append(f"| {k[0]} | {k[1]} | {k[2]:g} | " + " | ".join(
+            f"{o['psnr_center']:.2f} / {o['psnr_mean']:.2f}" for o in others) +
+            f" | {e['psnr_center']:.2f} / {e['psnr_mean']:.2f} | {e['psnr_center'] - m['psnr_center']:+.2f} / "
+            f"{e['psnr_mean'] - m['psnr_mean']:+.2f} | {e['psnr_center'] - bc:+.2f} / {e['psnr_mean'] - bm:+.2f} | "
+            f"{e['seconds']:.1f} | {cell[(*k, 'admm-uv')]['seconds']:.2f} | {cell[(*k, 'admm-uvst')]['seconds']:.2f} |")
+    return "\n".join(lines)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("mode", choices=("trace", "fit", "table", "format"))
+    parser.add_argument("inputs", nargs="*", help="fit / format: the trace / table JSON files")
+    parser.add_argument("--scenes", default="charts,deadleaves,finetexture")
+    parser.add_argument("--seeds", default="1,2")
+    parser.add_argument("--lux", default="0.5,2,12,50")
+    parser.add_argument("--lenses", type=int, default=48)
+    parser.add_argument("--c", default="0.3", help="lam / sigma values (trace)")
+    parser.add_argument("--f", default="1", help="lam_fb / lam values (trace)")
+    parser.add_argument("--rho", default="1")
+    parser.add_argument("--cg", default="5")
+    parser.add_argument("--starts", default="malvar", help="trace: malvar, linear4d, guarded")
+    parser.add_argument("--depth", default="estimated", help="trace: estimated, noocc, truth")
+    parser.add_argument("--iterations", type=int, default=30)
+    parser.add_argument("--top", type=int, default=8)
+    parser.add_argument("--real", action="store_true", help="table: also the light fields antinous and 2067")
+    parser.add_argument("--methods", default=",".join((*OTHERS, "admm-epi")))
+    parser.add_argument("-o", "--output")
+    args = parser.parse_args()
+    args.scenes = args.scenes.split(",")
+    args.seeds = [int(s) for s in args.seeds.split(",")]
+    args.lux = [float(v) for v in args.lux.split(",")]
+    args.c, args.f, args.rho = ([float(v) for v in getattr(args, k).split(",")] for k in ("c", "f", "rho"))
+    args.cg = [int(v) for v in args.cg.split(",")]
+    args.starts, args.depth, args.methods = args.starts.split(","), args.depth.split(","), args.methods.split(",")
+    if args.mode == "trace":
+        payload = {"args": {k: v for k, v in vars(args).items()}, "results": run_trace(args)}
+    elif args.mode == "fit":
+        payload = {"fitted": run_fit(args), "schedule": [dataclasses.asdict(s) for s in EPI_SCHEDULE]}
+    elif args.mode == "table":
+        payload = {"args": {k: v for k, v in vars(args).items()}, "rows": run_table(args),
+                   "schedule": [dataclasses.asdict(s) for s in EPI_SCHEDULE]}
+    else:
+        rows = [r for path in args.inputs for r in json.load(open(path))["rows"]]
+        for net in (False, True):
+            print(f"\nsafety net {'on' if net else 'off'}\n\n" + format_table(rows, net))
+        return
+    if args.output:
+        with open(args.output, "w") as fh:
+            json.dump(payload, fh, indent=1, default=float)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,99 @@
+"""Fit the safety net's threshold NET_K (lfcl/safety_net.py) on training captures only.
+
+For every training capture (charts, deadleaves and finetexture at seeds 1 and 2; charts planes
+carrying the four training photographs of docs/auto.md, seed 1) and light level, each method runs
+once without the net; the net's float64 twin (lfcl.ops.lensguard.guard_lens_means_np) is then applied
+at every candidate k, and the PSNR gains over Malvar (centre view, mean image) are tabulated. The k
+with the best worst case (the lower of the two gains, over every capture, level and method) wins.
+
+    python research/fit_safety_net.py --lenses 48 --shared ../shared
+
+Regenerates: lfcl.safety_net.NET_K (by hand, from the printed table; docs/auto.md "The safety net").
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import numpy as np
+
+from lfcl.evaluate import simulated_capture
+from lfcl.layout import LightFieldShape, planes_to_exchange
+from lfcl.methods import demosaic_lightfield
+from lfcl.metrics import centre_view, mean_image, psnr
+from lfcl.noise import from_noise_profile
+from lfcl.ops.lensguard import guard_lens_means_np
+
+KS = (2.0, 3.0, 4.0, 6.0, 8.0, 12.0, math.inf)
+#: The rule: the best worst case (lower of the centre and mean gains over Malvar, every capture, level and
+#: method); among the k within TIE_DB of it, the one with the larger median mean-image gain.
+TIE_DB = 0.05
+TRAINING_PHOTOS = ("realdata/imageio_test_images/Blackmagic.dng", "realdata/digicam_corpus/Canon_PowerShot_G2_CRW_0304.CRW",
+                   "realdata/digicam_corpus/Kodak_DC120_P003908_uncompressed.KDC", "realdata/a2tools_quicktake/QT150_TEST150.QTK")
+
+
+def training_captures(shared: Path):
+    for scene in ("charts", "deadleaves", "finetexture"):
+        for seed in (1, 2):
+            yield f"{scene} {seed}", {"scene": scene, "seed": seed}
+    for photo in TRAINING_PHOTOS:
+        path = shared / photo
+        if path.is_file():
+            yield f"photo {path.name}", {"scene": "charts", "seed": 1, "texture": str(path)}
+
+
+def gains(planes, capture, malvar_scores):
+    lightfield = planes_to_exchange(planes.astype(np.float32), LightFieldShape.from_exchange(capture.truth))
+    return (psnr(centre_view(lightfield), centre_view(capture.truth)) - malvar_scores[0],
+            psnr(mean_image(lightfield), mean_image(capture.truth)) - malvar_scores[1])
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--lenses", type=int, default=48)
+    parser.add_argument("--lux", default="0.5,2,12,50")
+    parser.add_argument("--methods", default="admm-uv,admm-uvst,admm-uv-xc",
+                        help="the methods the net guards on the default path and auto's ADMM picks")
+    parser.add_argument("--shared", type=Path, default=Path("../shared"))
+    args = parser.parse_args(argv)
+    rows = []
+    for label, source in training_captures(args.shared):
+        for lux in (float(v) for v in args.lux.split(",")):
+            capture = simulated_capture(args.lenses, lux, **source)
+            noise = from_noise_profile(capture.noise_profile, capture.mosaic)
+            malvar = demosaic_lightfield(capture.mosaic, capture.pattern, capture.pitch, "malvar").planes
+            m_scores = gains(malvar, capture, (0.0, 0.0))
+            for method in args.methods.split(","):
+                x = demosaic_lightfield(capture.mosaic, capture.pattern, capture.pitch, method, noise=noise,
+                                        safety_net=False).planes
+                for k in KS:
+                    y = x if math.isinf(k) else guard_lens_means_np(x, malvar, capture.mosaic, capture.pitch,
+                                                                    gain=noise.gain, floor=noise.floor, k=k)[0]
+                    centre, mean = gains(y, capture, m_scores)
+                    rows.append((label, lux, method, k, centre, mean))
+            print(f"{label} {lux:g} lux done", flush=True)
+    print("\n| method | " + " | ".join(f"k={k:g}" for k in KS) + " |   (worst of centre and mean gain, dB)")
+    print("|---|" + "---|" * len(KS))
+    for method in args.methods.split(","):
+        cells = [min(min(r[4], r[5]) for r in rows if r[2] == method and r[3] == k) for k in KS]
+        print(f"| {method} | " + " | ".join(f"{c:+.2f}" for c in cells) + " |")
+    print("\n| k | worst dB | worst centre | worst mean | median centre | median mean |")
+    print("|---|---|---|---|---|---|")
+    summary = {}
+    for k in KS:
+        sel = [r for r in rows if r[3] == k]
+        summary[k] = (min(min(r[4], r[5]) for r in sel), float(np.median([r[5] for r in sel])))
+        print(f"| {k:g} | {summary[k][0]:+.2f} | {min(r[4] for r in sel):+.2f} | {min(r[5] for r in sel):+.2f} "
+              f"| {np.median([r[4] for r in sel]):+.2f} | {summary[k][1]:+.2f} |")
+    best_worst = max(w for w, _ in summary.values())
+    best = max((k for k in KS if summary[k][0] >= best_worst - TIE_DB), key=lambda k: summary[k][1])
+    print(f"\nchosen: k = {best:g} (worst {summary[best][0]:+.2f} dB, median mean gain {summary[best][1]:+.2f} dB)")
+    print("\nworst cells at that k:")
+    for r in sorted((r for r in rows if r[3] == best), key=lambda r: min(r[4], r[5]))[:8]:
+        print(f"  {r[0]} {r[1]:g} lux {r[2]}: centre {r[4]:+.2f}, mean {r[5]:+.2f}")
+
+
+if __name__ == "__main__":
+    main()

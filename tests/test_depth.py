@@ -1,0 +1,267 @@
+"""Disparity from the raw (lfcl.depth): device vs numpy cost volume, recovery of known planes,
+bad input, the HCI sign on antinous, the metrics and the `--outputs depth` files."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import shared_path
+
+from lfcl.depth import badpix, candidates, depth_scores, estimate_disparity, mse100, read_pfm
+from lfcl.depth.cost import CostVolume, cost_volume_np
+from lfcl.noise import NoiseEstimate
+from lfcl.sim.capture import simulate
+from lfcl.sim.deadleaves import DeadLeavesTexture, _texture_box
+from lfcl.sim.planes import Plane
+
+# (S, T, U, V, model, origin, views): odd and even pitch, one lens, a crop origin, a half aperture.
+TWIN_CASES = [(3, 4, 9, 9, "plane", (0, 0), None), (2, 5, 5, 4, "mean", (1, 0), None),
+              (1, 1, 9, 9, "plane", (1, 1), None), (4, 3, 3, 3, "plane", (0, 1), (0, 1, 0, 2)),
+              (3, 3, 9, 9, "plane", (0, 0), (4, 8, 0, 8))]
+
+
+@pytest.mark.parametrize("case", TWIN_CASES, ids=str)
+def test_device_cost_volume_matches_numpy(runtime, rng, case):
+    S, T, U, V, model, origin, views = case
+    mosaic = rng.uniform(0.05, 0.6, (S * U, T * V)).astype(np.float32)
+    ds = np.array([-1.3, -1.0, -0.5, -0.05, 0.0, 0.35, 1.0, 2.0], np.float32)
+    expected = cost_volume_np(mosaic, "GRBG", (U, V), ds, origin=origin, noise=(1e-3, 1e-4), saturation=0.55,
+                              model=model, views=views)
+    op = CostVolume(runtime, mosaic.shape, "GRBG", (U, V), ds, origin=origin, model=model)
+    got = op.forward(runtime.to_device(mosaic), (1e-3, 1e-4), 0.55, views).get()
+    assert got.shape == (2, ds.size, S, T)
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-5 * scale)
+    assert expected[1].max() > 0  # some samples were gathered (saturation left some in)
+
+
+def test_cost_is_zero_in_expectation_for_pure_noise(rng):
+    # A flat grey field plus Gaussian noise of the stated variance: excess / weight ~ 0 at every d.
+    S, T, U, V = 6, 6, 9, 9
+    sigma2 = 1e-4
+    mosaic = (0.3 + np.sqrt(sigma2) * rng.standard_normal((S * U, T * V))).astype(np.float32)
+    ds = np.array([-0.75, 0.0, 0.5, 1.0], np.float32)
+    excess, weight = cost_volume_np(mosaic, "RGGB", (U, V), ds, noise=(0.0, sigma2))
+    per_sample = excess.sum(axis=(1, 2)) / weight.sum(axis=(1, 2))
+    assert np.all(np.abs(per_sample) < 0.1), per_sample
+
+
+def two_planes(S, T, d_front, d_back, seed=0):
+    """A dead-leaves square (d_front) over a dead-leaves background (d_back) and its true disparity map."""
+    streams = np.random.SeedSequence([seed, 77]).spawn(2)
+    rect = (0.25 * S, 0.25 * T, 0.75 * S, 0.75 * T)
+    planes = [Plane("front", d_front, DeadLeavesTexture(_texture_box(rect, d_front, S, T),
+                                                        np.random.default_rng(streams[0]), r_max=S / 8), rect),
+              Plane("back", d_back, DeadLeavesTexture(_texture_box(None, d_back, S, T),
+                                                      np.random.default_rng(streams[1]), r_max=S / 4))]
+    y, x = np.mgrid[0:S, 0:T] + 0.5
+    truth = np.where(planes[0].covers(x, y), d_front, d_back)
+    return planes, truth
+
+
+def sensor_noise(capture, raw):
+    gain, floor = capture.sensor.noise_profile()
+    return NoiseEstimate(gain, floor, float(np.sqrt(gain * raw.mean() + floor)), "test")
+
+
+@pytest.mark.parametrize("lux, tolerance, share", [(12.0, 0.1, 0.85), (0.5, 0.15, 0.75)])
+def test_two_planes_are_recovered(lux, tolerance, share):
+    S = T = 32
+    planes, truth = two_planes(S, T, 0.7, -0.45)
+    cap = simulate(planes=planes, lenses=(S, T), pitch=9, lux=lux, seed=2)
+    raw = cap.normalised_raw()
+    depth = estimate_disparity(raw, cap.pattern, 9, noise=sensor_noise(cap, raw))
+    assert depth.disparity.shape == depth.confidence.shape == (S, T)
+    assert depth.disparity.dtype == depth.confidence.dtype == np.float32
+    inner = np.zeros((S, T), bool)  # away from the occlusion edge and the frame
+    inner[3:-3, 3:-3] = True
+    edge = np.zeros((S, T), bool)
+    edge[6:26, 6:26] = True
+    edge[10:22, 10:22] = False
+    inner &= ~edge
+    good = np.abs(depth.disparity - truth) <= tolerance
+    assert good[inner].mean() >= share, good[inner].mean()
+    # Both planes' medians within a tenth of their disparity.
+    assert abs(np.median(depth.disparity[10:22, 10:22]) - 0.7) < 0.1
+    assert abs(np.median(depth.disparity[:4, :]) + 0.45) < 0.1
+
+
+def test_flat_scene_has_low_confidence_and_finite_output(rng):
+    S, T, U, V = 12, 10, 9, 9
+    mosaic = (0.2 + 0.004 * rng.standard_normal((S * U, T * V))).astype(np.float32)
+    depth = estimate_disparity(mosaic, "GRBG", 9, noise=NoiseEstimate(0.0, 0.004**2, 0.004, "test"))
+    assert np.all(np.isfinite(depth.disparity)) and np.all(np.isfinite(depth.confidence))
+    assert depth.confidence.max() <= 1 and depth.confidence.min() >= 0
+    assert np.median(depth.confidence) < 0.2
+    # A textured scene, for contrast, is trusted.
+    planes, _ = two_planes(S, T, 0.4, 0.4)
+    cap = simulate(planes=planes, lenses=(S, T), pitch=9, lux=12, seed=1)
+    raw = cap.normalised_raw()
+    textured = estimate_disparity(raw, cap.pattern, 9, noise=sensor_noise(cap, raw))
+    assert np.median(textured.confidence) > max(0.3, np.median(depth.confidence) + 0.2)
+
+
+def test_saturated_scene_is_unknown():
+    mosaic = np.ones((5 * 9, 6 * 9), np.float32)
+    depth = estimate_disparity(mosaic, "RGGB", 9, noise=NoiseEstimate(1e-4, 1e-6, 0.01, "test"))
+    assert np.all(depth.confidence == 0)
+    assert np.all(np.isfinite(depth.disparity))
+
+
+@pytest.mark.parametrize("lenses, pitch", [((1, 1), (9, 9)), ((3, 5), (9, 9)), ((5, 2), (7, 5)), ((2, 3), (4, 4))])
+def test_tiny_and_odd_sizes_give_finite_output(rng, lenses, pitch):
+    S, T = lenses
+    U, V = pitch
+    mosaic = rng.uniform(0.1, 0.5, (S * U, T * V)).astype(np.float32)
+    depth = estimate_disparity(mosaic, "BGGR", pitch, origin=(1, 0))  # noise estimated (or MAD) from the raw
+    assert depth.disparity.shape == (S, T)
+    assert np.all(np.isfinite(depth.disparity)) and np.all(np.isfinite(depth.confidence))
+    assert np.all(np.abs(depth.disparity) <= depth.dmax)
+
+
+def test_numpy_backend_agrees_with_the_device(rng):
+    planes, _ = two_planes(8, 8, 0.5, -0.3)
+    cap = simulate(planes=planes, lenses=(8, 8), pitch=9, lux=12, seed=4)
+    raw = cap.normalised_raw()
+    noise = sensor_noise(cap, raw)
+    options = {"dmax": 1.0, "step": 0.1}
+    dev = estimate_disparity(raw, cap.pattern, 9, noise=noise, **options)
+    ref = estimate_disparity(raw, cap.pattern, 9, noise=noise, backend="numpy", **options)
+    np.testing.assert_allclose(dev.disparity, ref.disparity, atol=1e-3)
+    np.testing.assert_allclose(dev.confidence, ref.confidence, atol=1e-3)
+
+
+@pytest.mark.parametrize("bad, message", [(np.nan, "finite"), (np.inf, "finite")])
+def test_non_finite_input_is_refused(bad, message):
+    mosaic = np.full((18, 18), 0.3, np.float32)
+    mosaic[4, 7] = bad
+    with pytest.raises(ValueError, match=message):
+        estimate_disparity(mosaic, "GRBG", 9)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"pitch": 7}, "whole number"), ({"pattern": "RGBX"}, "Bayer"), ({"step": 0}, "step"),
+    ({"radius": -1}, "radius"), ({"model": "cubic"}, "model"), ({"colour": 1}, "unknown disparity options")])
+def test_bad_arguments_are_refused(kwargs, message):
+    args = {"pattern": "GRBG", "pitch": 9}
+    args.update({k: kwargs.pop(k) for k in list(kwargs) if k in args})
+    with pytest.raises(ValueError, match=message):
+        estimate_disparity(np.full((18, 18), 0.3, np.float32), args["pattern"], args["pitch"], **kwargs)
+
+
+def test_candidates_are_symmetric_and_include_zero():
+    ds = candidates(2.0, 0.05)
+    assert ds.size == 81 and ds[0] == pytest.approx(-2.0) and ds[-1] == pytest.approx(2.0) and 0.0 in ds
+
+
+def test_antinous_sign_matches_the_hci_ground_truth():
+    folder = shared_path("realdata", "hci_epinet", "antinous")
+    gt = read_pfm(folder / "gt_disp_lowres.pfm")
+    # A textured 48x48-lens crop (the left edge of the face against the background).
+    s0, t0, n = 100, 150, 48
+    from lfcl.sim.lightfield import load_lightfield
+
+    lf = load_lightfield(folder)[s0:s0 + n, t0:t0 + n]
+    cap = simulate(lightfield=lf, lux=12, seed=1)
+    raw = cap.normalised_raw()
+    depth = estimate_disparity(raw, cap.pattern, cap.geometry.pitch, noise=sensor_noise(cap, raw), dmax=3.0)
+    truth = gt[s0:s0 + n, t0:t0 + n]
+    corr = np.corrcoef(depth.disparity.ravel(), truth.ravel())[0, 1]
+    assert corr > 0.5, corr
+    assert np.corrcoef(depth.disparity.ravel(), -truth.ravel())[0, 1] < 0
+
+
+def test_read_pfm_flips_bottom_up_rows(tmp_path):
+    values = np.arange(6, dtype="<f4").reshape(2, 3)  # as stored: bottom row first
+    path = tmp_path / "d.pfm"
+    path.write_bytes(b"Pf\n3 2\n-1.0\n" + values.tobytes())
+    np.testing.assert_array_equal(read_pfm(path), [[3, 4, 5], [0, 1, 2]])
+    (tmp_path / "bad.pfm").write_bytes(b"P6\n")
+    with pytest.raises(ValueError, match="not a PFM"):
+        read_pfm(tmp_path / "bad.pfm")
+
+
+def test_hci_metrics_on_hand_made_arrays():
+    truth = np.zeros((2, 5))
+    estimate = np.array([[0.0, 0.05, 0.08, 0.12, -0.2], [0.07, 0.1, -0.09, 0.0, 1.0]])
+    # errors > 0.07: 0.08, 0.12, 0.2, 0.1, 0.09, 1.0 -> 6 of 10; > 0.1: 0.12, 0.2, 1.0 -> 3 of 10
+    assert badpix(estimate, truth, 0.07) == pytest.approx(60.0)
+    assert badpix(estimate, truth, 0.1) == pytest.approx(30.0)
+    squares = np.array([0, 0.05, 0.08, 0.12, 0.2, 0.07, 0.1, 0.09, 0, 1.0]) ** 2
+    assert mse100(estimate, truth) == pytest.approx(100 * squares.mean())
+    mask = np.zeros((2, 5), bool)
+    mask[0, :2] = True
+    assert depth_scores(estimate, truth, mask) == {"badpix_0.07": 0.0, "badpix_0.1": 0.0,
+                                                   "mse_x100": pytest.approx(100 * 0.05**2 / 2)}
+    with pytest.raises(ValueError, match="shapes"):
+        badpix(estimate, truth[:, :3])
+
+
+def test_disparity_map_metadata_says_units_and_sign():
+    meta = estimate_disparity(np.full((18, 27), 0.3, np.float32), "GRBG", 9, dmax=1.0, step=0.1).as_dict()
+    assert meta["units"] == "lenses per view step"
+    assert "s - d (u - uc)" in meta["sign"]
+    assert meta["search_range"] == [-1.0, 1.0] and meta["step"] == pytest.approx(0.1)
+    assert meta["lenses"] == [2, 3]
+    json.dumps(meta)  # plain JSON for the file headers
+
+
+def test_process_writes_the_depth_files(tmp_path):
+    import OpenImageIO as oiio
+    from click.testing import CliRunner
+
+    from lfcl.cli import cli
+
+    capture = tmp_path / "capture"
+    result = CliRunner().invoke(cli, ["simulate", "--scene", "deadleaves", "--lenses", "10x12", "--lux", "12",
+                                      "--seed", "3", "-o", str(capture)])
+    assert result.exit_code == 0, result.output
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["process", str(capture / "raw.dng"), "--pitch", "9", "--method", "malvar",
+                                      "--outputs", "center,depth", "-o", str(out), "--json"])
+    assert result.exit_code == 0, result.output
+    for name in ("depth.exr", "depth_confidence.exr", "depth.png", "center.exr"):
+        assert (out / name).is_file(), name
+    buf = oiio.ImageBuf(str(out / "depth.exr"))
+    spec = buf.spec()
+    assert (spec.height, spec.width, spec.nchannels) == (10, 12, 1)
+    meta = json.loads(spec.getattribute("lfcl:depth"))
+    assert meta["units"] == "lenses per view step" and "HCI" in meta["sign"]
+    pixels = np.asarray(buf.get_pixels(oiio.FLOAT))
+    assert np.all(np.isfinite(pixels)) and np.all(np.abs(pixels) <= meta["search_range"][1])
+    conf = np.asarray(oiio.ImageBuf(str(out / "depth_confidence.exr")).get_pixels(oiio.FLOAT))
+    assert conf.min() >= 0 and conf.max() <= 1
+    png = oiio.ImageBuf(str(out / "depth.png")).spec()
+    assert (png.height, png.width, png.nchannels) == (10, 12, 3)
+    lo, hi = json.loads(png.getattribute("lfcl:preview_range"))
+    assert lo < hi
+    summary = json.loads((out / "summary.json").read_text())
+    assert "depth.exr" in summary["outputs"]
+
+
+
+def test_smoothing_fills_unknown_lenses_from_their_neighbours(rng):
+    # A textured field at d = 0.6 with a flat (texture-less) square in the middle: its inner lenses are
+    # unknown; smoothing moves them towards their neighbours and leaves the confident lenses alone.
+    S = T = 20
+    planes, _ = two_planes(S, T, 0.6, 0.6)
+    cap = simulate(planes=planes, lenses=(S, T), pitch=9, lux=12, seed=5)
+    raw = cap.normalised_raw()
+    raw.reshape(S, 9, T, 9)[7:13, :, 7:13, :] = 0.2 + 0.003 * rng.standard_normal((6, 9, 6, 9))
+    noise = sensor_noise(cap, raw)
+    plain = estimate_disparity(raw, cap.pattern, 9, noise=noise, radius=1)
+    smooth = estimate_disparity(raw, cap.pattern, 9, noise=noise, radius=1, smooth=1.0)
+    hole = (slice(9, 11), slice(9, 11))
+    assert plain.confidence[hole].max() < 0.2
+    np.testing.assert_array_equal(smooth.confidence, plain.confidence)  # confidence stays the step-3 one
+    assert np.all(np.isfinite(smooth.disparity))
+    sure = plain.confidence > 0.98
+    assert sure.sum() >= 10
+    assert np.abs(smooth.disparity - plain.disparity)[sure].max() < 0.05
+    # The unknown lenses take a weighted mean of their neighbours: inside their range, and moved.
+    ring = plain.disparity[8:12, 8:12].copy()
+    ring[1:3, 1:3] = np.nan
+    assert np.nanmin(ring) - 1e-3 <= smooth.disparity[hole].min() <= smooth.disparity[hole].max() <= np.nanmax(ring) + 1e-3
+    assert np.abs(smooth.disparity[hole] - plain.disparity[hole]).max() > 1e-3

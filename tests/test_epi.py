@@ -1,0 +1,321 @@
+"""Differences along the epipolar lines (lfcl/ops/epi.py): a loop definition, device vs numpy twin,
+dot tests, the diagonal of the gram, and the EPI ADMM (lfcl/solvers/epi.py) against its float64 reference."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from conftest import relative_dot_error
+
+from lfcl.ops.epi import (EpiGradient, epi_adjoint_np, epi_diagonal_np, epi_gradient_np, epi_gram_np, epi_matrix_np,
+                          keys_weights_np)
+from lfcl.ops.gradient import gradient_np
+
+# (channels, S, T, U, V): odd and even pitches, a single lens row, sizes that fit no work-group size.
+GEOMETRIES = [(3, 5, 6, 9, 9), (1, 4, 3, 3, 5), (2, 1, 7, 4, 3), (3, 6, 5, 2, 2)]
+
+
+def keys(f: float) -> list[float]:
+    """Catmull-Rom weights written out (Keys 1981, a = -1/2), independently of keys_weights_np."""
+    a = -0.5
+
+    def kernel(x):
+        x = abs(x)
+        if x < 1:
+            return (a + 2) * x**3 - (a + 3) * x**2 + 1
+        if x < 2:
+            return a * x**3 - 5 * a * x**2 + 8 * a * x - 4 * a
+        return 0.0
+
+    return [kernel(f + 1), kernel(f), kernel(1 - f), kernel(2 - f)]
+
+
+def loop_epi(x5: np.ndarray, disparity: np.ndarray, confidence: np.ndarray) -> np.ndarray:
+    """D_epi on [C, S, U, T, V], one sample at a time (the definition in lfcl/ops/epi.py)."""
+    C, S, U, T, V = x5.shape
+    f32 = np.float32
+    out = np.zeros((2, *x5.shape))
+    for s, u, t, v in np.ndindex(S, U, T, V):
+        d0 = disparity[s, t]
+        # the lens the ray sees in the centre view, float32 arithmetic as documented
+        sc = min(max(math.floor((f32(s) + d0 * (f32(u) - f32(0.5) * f32(U - 1))) + f32(0.5)), 0), S - 1)
+        tc = min(max(math.floor((f32(t) + d0 * (f32(v) - f32(0.5) * f32(V - 1))) + f32(0.5)), 0), T - 1)
+        d, w = disparity[sc, tc], float(confidence[sc, tc])
+        for block, (own, n, last) in enumerate(((s, S, u == U - 1), (t, T, v == V - 1))):
+            if last:
+                continue
+            p = f32(own) - d
+            i0 = math.floor(p)
+            for c in range(C):
+                value = 0.0
+                for k, weight in zip(range(-1, 3), keys(float(p - f32(i0)))):
+                    lens = min(max(i0 + k, 0), n - 1)
+                    value += weight * (x5[c, lens, u + 1, t, v] if block == 0 else x5[c, s, u, lens, v + 1])
+                out[block, c, s, u, t, v] = w * (value - x5[c, s, u, t, v])
+    return out
+
+
+def maps(rng, S, T, spread=1.3):
+    disparity = rng.uniform(-spread, spread, (S, T)).astype(np.float32)
+    disparity[0, 0] = 1.0  # an integer disparity: the taps at f = 0
+    confidence = rng.uniform(0, 1, (S, T)).astype(np.float32)
+    return disparity, confidence
+
+
+def test_keys_weights_are_catmull_rom():
+    for f in (0.0, 0.25, 0.5, 0.9):
+        np.testing.assert_allclose(keys_weights_np(f), keys(f), atol=1e-14)
+    np.testing.assert_allclose(keys_weights_np(np.linspace(0, 1, 7)).sum(-1), 1.0, atol=1e-14)
+
+
+@pytest.mark.parametrize("geometry", GEOMETRIES[:2], ids=str)
+def test_numpy_twin_matches_the_definition(rng, geometry):
+    C, S, T, U, V = geometry
+    x = rng.standard_normal((C, S * U, T * V))
+    disparity, confidence = maps(rng, S, T, spread=2.5)  # far enough that the clamped boundary matters
+    expected = loop_epi(x.reshape(C, S, U, T, V), disparity, confidence).reshape(2, C, S * U, T * V)
+    np.testing.assert_allclose(epi_gradient_np(x, disparity, (U, V), confidence), expected, atol=1e-12)
+
+
+def test_zero_disparity_is_the_uv_gradient(rng):
+    x = rng.standard_normal((3, 4 * 9, 5 * 9))
+    zeros = np.zeros((4, 5), np.float32)
+    np.testing.assert_allclose(epi_gradient_np(x, zeros, (9, 9)), gradient_np(x, (9, 9), "uv"), atol=1e-12)
+
+
+def test_integer_disparity_is_a_lens_shift(rng):
+    """d = 1 everywhere: the u-neighbour of (s, u) is (s - 1, u + 1) (lens 0 clamps to itself)."""
+    U = V = 3
+    x = rng.standard_normal((1, 4 * U, 4 * V))
+    z = epi_gradient_np(x, np.ones((4, 4), np.float32), (U, V))
+    x5 = x.reshape(1, 4, U, 4, V)
+    np.testing.assert_allclose(z[0].reshape(x5.shape)[0, 2, 0, 1, 2], x5[0, 1, 1, 1, 2] - x5[0, 2, 0, 1, 2])
+    np.testing.assert_allclose(z[1].reshape(x5.shape)[0, 2, 0, 1, 1], x5[0, 2, 0, 0, 2] - x5[0, 2, 0, 1, 1])
+
+
+def test_a_scene_on_its_disparity_plane_has_no_differences():
+    """A light field rendered from one textured plane at disparity d (lfcl.sim) is constant along
+    the epipolar lines: D_epi(d) of it is small where D_uv (d = 0) is not."""
+    from lfcl.sim.planes import Plane, render_planes
+
+    def texture(x, y):
+        return np.stack([0.5 + 0.4 * np.sin(0.9 * x) * np.cos(0.7 * y)] * 3, axis=-1)
+
+    S = T = 12
+    lf = render_planes([Plane("p", 0.4, texture)], (S, T), (9, 9), supersample=1)
+    x = lf.transpose(4, 0, 2, 1, 3).reshape(3, S * 9, T * 9).astype(np.float64)
+    inner = (slice(None), slice(None), slice(3 * 9, 9 * 9), slice(3 * 9, 9 * 9))  # away from the frame
+    along = np.abs(epi_gradient_np(x, np.full((S, T), 0.4, np.float32), (9, 9))[inner]).mean()
+    across = np.abs(epi_gradient_np(x, np.zeros((S, T), np.float32), (9, 9))[inner]).mean()
+    assert along < 0.05 * across
+
+
+@pytest.mark.parametrize("geometry", GEOMETRIES, ids=str)
+def test_device_matches_numpy(runtime, rng, geometry):
+    C, S, T, U, V = geometry
+    x = rng.standard_normal((C, S * U, T * V)).astype(np.float32)
+    z = rng.standard_normal((2, *x.shape)).astype(np.float32)
+    disparity, confidence = maps(rng, S, T, spread=2.5)
+    op = EpiGradient(runtime, x.shape, (U, V))
+    op.set_maps(disparity, confidence)
+    M = epi_matrix_np(disparity, (U, V), confidence)
+    x64, z64 = x.astype(np.float64), z.astype(np.float64)
+    np.testing.assert_allclose(op.forward(runtime.to_device(x)).get(),
+                               epi_gradient_np(x64, disparity, (U, V), matrix=M), atol=2e-6)
+    np.testing.assert_allclose(op.adjoint(runtime.to_device(z)).get(),
+                               epi_adjoint_np(z64, disparity, (U, V), matrix=M), atol=2e-5)
+    np.testing.assert_allclose(op.gram(runtime.to_device(x)).get(), epi_gram_np(x64, disparity, (U, V), confidence),
+                               atol=2e-5)
+    np.testing.assert_allclose(op.diagonal().get(), epi_diagonal_np(disparity, (U, V), matrix=M), atol=2e-6)
+    # accumulate adds into out
+    base = rng.standard_normal(x.shape).astype(np.float32)
+    total = op.adjoint(runtime.to_device(z), out=runtime.to_device(base), accumulate=True).get()
+    np.testing.assert_allclose(total, base + epi_adjoint_np(z64, disparity, (U, V), matrix=M), atol=2e-5)
+
+
+def test_adjoint_dot_test(runtime, rng):
+    C, S, T, U, V = 3, 7, 6, 9, 9
+    x = rng.standard_normal((C, S * U, T * V)).astype(np.float32)
+    y = rng.standard_normal((2, *x.shape)).astype(np.float32)
+    disparity, confidence = maps(rng, S, T, spread=3.0)
+    op = EpiGradient(runtime, x.shape, (U, V))
+    op.set_maps(disparity, confidence)
+    dx = op.forward(runtime.to_device(x)).get().astype(np.float64)
+    dty = op.adjoint(runtime.to_device(y)).get().astype(np.float64)
+    assert relative_dot_error(np.vdot(dx, y), np.vdot(x, dty)) <= 1e-5
+    x64, y64 = x.astype(np.float64), y.astype(np.float64)
+    lhs = np.vdot(epi_gradient_np(x64, disparity, (U, V), confidence), y64)
+    rhs = np.vdot(x64, epi_adjoint_np(y64, disparity, (U, V), confidence))
+    assert relative_dot_error(lhs, rhs) <= 1e-12
+
+
+def test_diagonal_is_the_gram_diagonal(rng):
+    S, T, U, V = 4, 3, 3, 3
+    disparity, confidence = maps(rng, S, T, spread=2.0)
+    eye = np.eye(S * U * T * V)
+    columns = [epi_gram_np(eye[j].reshape(1, S * U, T * V), disparity, (U, V), confidence).ravel()
+               for j in range(eye.shape[0])]
+    np.testing.assert_allclose(epi_diagonal_np(disparity, (U, V), confidence).ravel(), np.diag(np.stack(columns, 1)),
+                               atol=1e-12)
+
+
+def test_bad_maps_are_refused(runtime):
+    op = EpiGradient(runtime, (3, 18, 18), (9, 9))
+    with pytest.raises(ValueError, match="disparity must be a map of 2x2"):
+        op.set_maps(np.zeros((3, 2), np.float32))
+    with pytest.raises(ValueError, match="finite"):
+        op.set_maps(np.full((2, 2), np.nan, np.float32))
+    with pytest.raises(ValueError, match="within"):
+        op.set_maps(np.zeros((2, 2), np.float32), np.full((2, 2), 1.5, np.float32))
+    with pytest.raises(ValueError, match="set_maps"):
+        op.forward(runtime.to_device(np.zeros((3, 18, 18), np.float32)))
+
+
+# --- the EPI ADMM (lfcl/solvers/epi.py) ---------------------------------------------------------------
+
+
+def plane_scene_mosaic(rng, S, T, U, V, disparity=0.4, pattern="GRBG", noise=0.02):
+    """A noisy mosaic of a textured plane at ``disparity`` (lfcl.sim), and its Malvar start."""
+    from lfcl.ops.cfa import cfa_sample_np
+    from lfcl.ops.malvar import malvar_np
+    from lfcl.sim.planes import Plane, render_planes
+
+    def texture(x, y):
+        return np.stack([0.4 + 0.3 * np.sin(1.1 * x + c) * np.cos(0.8 * y - c) for c in range(3)], axis=-1)
+
+    lf = render_planes([Plane("p", disparity, texture)], (S, T), (U, V), supersample=1)
+    planes = lf.transpose(4, 0, 2, 1, 3).reshape(3, S * U, T * V)
+    b = (cfa_sample_np(planes, pattern) + noise * rng.standard_normal((S * U, T * V))).astype(np.float32)
+    return b, malvar_np(b, pattern), planes
+
+
+@pytest.mark.parametrize("pattern", ["GRBG", "BGGR"])
+@pytest.mark.parametrize("lam_fb", [0.0, 0.02])
+def test_solver_matches_the_float64_reference(runtime, rng, pattern, lam_fb):
+    from lfcl.solvers.epi import EpiAdmmSolver, EpiPrior, admm_epi_reference
+    from lfcl.solvers.params import AdmmParams
+
+    S, T, U, V = 5, 4, 9, 9
+    b, x0, _ = plane_scene_mosaic(rng, S, T, U, V, pattern=pattern)
+    disparity, confidence = maps(rng, S, T, spread=1.0)
+    prior = EpiPrior(disparity, confidence, lam_fb=lam_fb)
+    params = AdmmParams(lam=0.01, rho=0.5, max_iter=8, cg_steps=4, cg_tol=0.0)
+    weights = np.ones((U, V))
+    weights[0, 0] = 0.0  # a dark corner out of the data term
+    weights[4, 4] = 0.5
+    expected = admm_epi_reference(b, pattern, (U, V), params, x0, prior, lens_weights=weights)
+    solver = EpiAdmmSolver(runtime, b.shape, pattern, (U, V))
+    got = solver.solve(runtime.to_device(b), runtime.to_device(x0), params, prior, lens_weights=weights)
+    relative = np.linalg.norm(got.x.get() - expected.x) / np.linalg.norm(expected.x)
+    assert relative <= 1e-4, relative
+    assert got.iterations == expected.iterations == 8
+    for mine, ref in zip(got.history, expected.history):
+        assert mine.objective == pytest.approx(ref.objective, rel=1e-4)
+        assert mine.primal_residual == pytest.approx(ref.primal_residual, rel=1e-3, abs=1e-6)
+        assert mine.dual_residual == pytest.approx(ref.dual_residual, rel=1e-3, abs=1e-6)
+        assert mine.rms_change == pytest.approx(ref.rms_change, rel=1e-3, abs=1e-7)
+
+
+def test_reference_solves_the_problem_it_states(rng):
+    """Run to convergence on a tiny problem: perturbed points have a larger objective."""
+    from lfcl.ops.cfa import cfa_sample_np
+    from lfcl.solvers.epi import EpiPrior, admm_epi_reference
+    from lfcl.solvers.params import AdmmParams
+
+    S, T, U, V = 3, 3, 3, 3
+    b, x0, _ = plane_scene_mosaic(rng, S, T, U, V, noise=0.05)
+    disparity, confidence = maps(rng, S, T, spread=0.8)
+    prior = EpiPrior(disparity, confidence, lam_fb=0.01)
+    params = AdmmParams(lam=0.02, rho=1.0, max_iter=500, cg_steps=30, cg_tol=1e-12)
+    result = admm_epi_reference(b, "GRBG", (U, V), params, x0, prior)
+    assert result.history[-1].primal_residual < 1e-3 and result.history[-1].rms_change < 1e-5
+    fallback_d = np.zeros_like(disparity)
+
+    def objective(x):
+        return (0.5 * np.sum((cfa_sample_np(x, "GRBG") - b) ** 2)
+                + 0.02 * np.abs(epi_gradient_np(x, disparity, (U, V), confidence)).sum()
+                + 0.01 * np.abs(epi_gradient_np(x, fallback_d, (U, V), 1 - confidence)).sum())
+
+    best = objective(result.x)
+    for _ in range(50):
+        assert objective(result.x + 1e-3 * rng.standard_normal(result.x.shape)) >= best - 1e-9
+
+
+def test_the_right_disparity_denoises_more(runtime, rng):
+    """On a plane at d = 0.6 the prior along the true lines gets closer to the truth than d = 0 (D_uv)."""
+    from lfcl.solvers.epi import EpiAdmmSolver, EpiPrior
+    from lfcl.solvers.params import AdmmParams
+
+    S, T, U, V = 8, 8, 9, 9
+    b, x0, truth = plane_scene_mosaic(rng, S, T, U, V, disparity=0.6, noise=0.05)
+    solver = EpiAdmmSolver(runtime, b.shape, "GRBG", (U, V))
+    params = AdmmParams(lam=0.02, rho=1.0, max_iter=15, cg_steps=5)
+    errors = {}
+    for d in (0.0, 0.6):
+        prior = EpiPrior(np.full((S, T), d, np.float32))
+        x = solver.solve(runtime.to_device(b), runtime.to_device(x0), params, prior).x.get()
+        errors[d] = np.sqrt(np.mean((x - truth) ** 2))
+    assert errors[0.6] < 0.8 * errors[0.0], errors
+    assert errors[0.6] < 0.5 * np.sqrt(np.mean((x0 - truth) ** 2))
+
+
+def test_solver_refuses_what_it_cannot_do(runtime, rng):
+    from lfcl.solvers.epi import EpiAdmmSolver, EpiPrior
+    from lfcl.solvers.params import AdmmParams
+
+    b, x0, _ = plane_scene_mosaic(rng, 2, 2, 9, 9)
+    solver = EpiAdmmSolver(runtime, b.shape, "GRBG", (9, 9))
+    prior = EpiPrior(np.zeros((2, 2), np.float32))
+    with pytest.raises(ValueError, match="lam_xc"):
+        solver.solve(runtime.to_device(b), runtime.to_device(x0), AdmmParams(lam_xc=0.1), prior)
+    with pytest.raises(ValueError, match="x_update 'lens'"):
+        solver.solve(runtime.to_device(b), runtime.to_device(x0), AdmmParams(x_update="lens"), prior)
+    with pytest.raises(ValueError, match="lam_fb"):
+        EpiPrior(np.zeros((2, 2), np.float32), lam_fb=-1.0)
+
+
+def test_method_admm_epi_runs_and_records_the_disparity(runtime, rng):
+    """lfcl.methods: admm-epi estimates the disparity from the raw (lfcl.depth), solves, and says what it used."""
+    from lfcl.methods import demosaic_lightfield
+    from lfcl.noise import NoiseEstimate
+    from lfcl.solvers.epi import epi_setting
+
+    S, T, U, V = 10, 10, 9, 9
+    b, _, truth = plane_scene_mosaic(rng, S, T, U, V, disparity=0.5, noise=0.01)
+    noise = NoiseEstimate(gain=0.0, floor=1e-4, sigma=0.01, source="test")
+    result = demosaic_lightfield(b, "GRBG", (U, V), "admm-epi", noise=noise)
+    setting = epi_setting(0.01)  # the defaults follow the noise (EPI_SCHEDULE)
+    assert result.planes.shape == truth.shape and np.all(np.isfinite(result.planes))
+    assert result.parameters["lam"] == pytest.approx(setting.lam_per_sigma * 0.01)
+    assert result.parameters["lam_fb"] == pytest.approx(setting.fb_per_lam * setting.lam_per_sigma * 0.01)
+    assert result.parameters["start"] == setting.start
+    assert result.parameters["disparity"]["median"] == pytest.approx(0.5, abs=0.1)
+    assert result.iterations == setting.iterations
+    explicit = demosaic_lightfield(b, "GRBG", (U, V), "admm-epi", noise=noise, lam=0.002, iterations=3,
+                                   start="malvar", safety_net=False)
+    assert explicit.iterations == 3 and explicit.parameters["lam"] == pytest.approx(0.002)
+    assert explicit.parameters["lam_fb"] == pytest.approx(setting.fb_per_lam * 0.002)
+    malvar = demosaic_lightfield(b, "GRBG", (U, V), "malvar")
+    inner = (slice(None), slice(2 * U, (S - 2) * U), slice(2 * V, (T - 2) * V))
+    assert np.mean((result.planes - truth)[inner] ** 2) < np.mean((malvar.planes - truth)[inner] ** 2)
+
+
+def test_epi_setting_follows_the_noise_in_log_sigma():
+    """Between two rows lam / sigma, lam_fb / lam and the iterations are linear in log sigma; outside, the end rows."""
+    from lfcl.solvers.epi import EpiSetting, epi_setting
+
+    rows = (EpiSetting(sigma=1e-2, lam_per_sigma=0.4, fb_per_lam=2.0, iterations=18, start="linear4d"),
+            EpiSetting(sigma=1e-3, lam_per_sigma=0.2, fb_per_lam=1.0, iterations=10, start="malvar"))
+    quarter = 1e-3 * 10 ** 0.25  # a quarter of the way from 1e-3 to 1e-2 in log sigma
+    got = epi_setting(quarter, rows)
+    assert got.lam_per_sigma == pytest.approx(0.25) and got.fb_per_lam == pytest.approx(1.25)
+    assert got.iterations == 12 and got.start == "malvar" and got.sigma == pytest.approx(quarter)
+    assert epi_setting(1e-3 * 10 ** 0.75, rows).start == "linear4d"
+    low, high = epi_setting(1e-5, rows), epi_setting(0.5, rows)
+    assert (low.lam_per_sigma, low.iterations, low.start) == (0.2, 10, "malvar")
+    assert (high.lam_per_sigma, high.iterations, high.start) == (0.4, 18, "linear4d")
+    for bad in (0.0, -1.0, math.nan, math.inf):
+        with pytest.raises(ValueError, match="sigma"):
+            epi_setting(bad, rows)

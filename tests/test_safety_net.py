@@ -1,0 +1,89 @@
+"""The safety net (lfcl/safety_net.py) on the default path: never worse than Malvar, on the fine-texture family too."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lfcl.method_names import DEFAULT_METHOD
+from lfcl.methods import demosaic_lightfield
+from lfcl.noise import NoiseEstimate
+from lfcl.ops.lensguard import guard_lens_means_np
+from lfcl.ops.malvar import malvar_np
+from lfcl.safety_net import NET_K
+
+
+@pytest.fixture(scope="module")
+def finetexture():
+    """Fine texture off the focal plane (issue 18's failure), in the dark and in good light."""
+    from lfcl.evaluate import simulated_capture
+
+    return {lux: simulated_capture(24, lux, 3, "finetexture") for lux in (0.5, 12)}
+
+
+def _gains(capture, method, **options):
+    from lfcl.evaluate import run_method
+
+    malvar, result = run_method(capture, "malvar"), run_method(capture, method, **options)
+    return result["psnr_center"] - malvar["psnr_center"], result["psnr_mean"] - malvar["psnr_mean"], result
+
+
+@pytest.mark.parametrize("lux", [0.5, 12])
+def test_without_the_net_admm_uv_loses_the_mean_image_of_fine_texture(finetexture, lux):
+    _, mean, _ = _gains(finetexture[lux], "admm-uv", safety_net=False)
+    assert mean < -0.1  # what issue 18 reported: below Malvar on the mean image
+
+
+@pytest.mark.parametrize("lux", [0.5, 12])
+@pytest.mark.parametrize("method", [DEFAULT_METHOD, "admm-uv", "admm-uv-xc"])
+def test_with_the_net_no_view_is_worse_than_malvar(finetexture, lux, method):
+    centre, mean, result = _gains(finetexture[lux], method)
+    assert centre >= -0.1 and mean >= -0.1, (centre, mean)
+    net = result["parameters"]["safety_net"]
+    assert net["k"] == NET_K and 0 < net["lenses_from_malvar"] <= net["lenses"] == 24 * 24
+
+
+def test_the_net_is_the_lens_mean_guard_against_malvar_of_the_same_mosaic(rng):
+    mosaic = (0.3 + 0.05 * rng.standard_normal((27, 36))).astype(np.float32)
+    noise = NoiseEstimate(gain=1e-3, floor=1e-5, sigma=0.018, source="test")
+    plain = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=noise, iterations=3, safety_net=False)
+    netted = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=noise, iterations=3)
+    expected, replaced = guard_lens_means_np(plain.planes, malvar_np(mosaic, "GRBG"), mosaic, (9, 9),
+                                             gain=noise.gain, floor=noise.floor, k=NET_K)
+    np.testing.assert_allclose(netted.planes, expected, atol=2e-5)
+    report = netted.parameters["safety_net"]
+    assert report["lenses"] == 12 and report["colour_means_from_malvar"] == int(replaced.sum())
+    assert report["lenses_from_malvar"] == int((replaced == 3).sum()) and "Malvar" in report["why"]
+    assert "safety_net" not in plain.parameters
+
+
+def test_malvar_needs_no_net_and_auto_records_it_once(rng):
+    mosaic = (0.3 + 0.05 * rng.standard_normal((27, 36))).astype(np.float32)
+    assert "safety_net" not in demosaic_lightfield(mosaic, "GRBG", (9, 9), "malvar").parameters
+
+
+def test_without_a_noise_model_the_net_says_it_did_not_act():
+    one_lens = np.full((9, 9), 0.3, np.float32)  # too small to estimate the noise from
+    result = demosaic_lightfield(one_lens, "GRBG", (9, 9), "admm-uv", lam=0.01, iterations=2)
+    assert result.parameters["safety_net"]["lenses"] == 0
+    assert result.parameters["safety_net"]["why"].startswith("not applied: no noise model")
+
+
+def test_process_summary_says_what_the_net_did(tmp_path):
+    import json
+
+    from click.testing import CliRunner
+
+    from lfcl.cli import cli
+
+    capture = tmp_path / "cap"
+    assert CliRunner().invoke(cli, ["simulate", "--scene", "finetexture", "--lenses", "12x12", "--seed", "1",
+                                    "-o", str(capture)]).exit_code == 0
+    base = ["process", str(capture / "raw.dng"), "--pitch", "9", "--outputs", "center", "--no-previews"]
+    text = CliRunner().invoke(cli, [*base, "-o", str(tmp_path / "text")])
+    assert text.exit_code == 0, text.output
+    assert "safety net: " in text.output and "lenses took Malvar's colour means" in text.output
+    summary = json.loads((tmp_path / "text" / "summary.json").read_text())
+    assert summary["method"] == DEFAULT_METHOD and summary["parameters"]["safety_net"]["lenses"] == 144
+    off = CliRunner().invoke(cli, [*base, "--no-safety-net", "-o", str(tmp_path / "off"), "--json"])
+    assert off.exit_code == 0 and "safety_net" not in json.loads(off.stdout)["parameters"]
