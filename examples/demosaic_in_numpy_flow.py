@@ -11,7 +11,7 @@ import sys
 import numpy as np
 
 import lfcl
-from lfcl.imageio import read_image, write_image
+from lfcl.io.images import read_image, write_image
 
 
 def main(source: str, pattern: str, target: str) -> None:

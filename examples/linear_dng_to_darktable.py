@@ -16,7 +16,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from lfcl.stages import Decode, Demosaic, Grid, Outputs
+from lfcl.pipeline.stages import Decode, Demosaic, Grid, Outputs
 
 
 def render(dng: Path, out_dir: Path) -> None:

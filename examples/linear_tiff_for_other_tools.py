@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from lfcl.stages import Decode, Demosaic, Grid, Outputs
+from lfcl.pipeline.stages import Decode, Demosaic, Grid, Outputs
 
 
 def show(path: Path) -> None:
@@ -29,7 +29,7 @@ def show(path: Path) -> None:
     inp.close()
     note = spec.get_string_attribute("ImageDescription") or ""
     try:
-        method = json.loads(note)["lfcl"]["method"]  # lfcl's metadata, in every format (lfcl.imageio)
+        method = json.loads(note)["lfcl"]["method"]  # lfcl's metadata, in every format (lfcl.io.images)
     except (ValueError, KeyError, TypeError):
         method = "?"
     print(f"  {path.name}: {spec.width}x{spec.height}, {spec.nchannels} channels ({','.join(spec.channelnames)}), "

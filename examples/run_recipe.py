@@ -11,7 +11,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from lfcl.recipes import load_recipe, pipeline_from_recipe
+from lfcl.pipeline.recipes import load_recipe, pipeline_from_recipe
 from lfcl.sim import simulate, write_capture
 
 

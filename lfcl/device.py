@@ -1,7 +1,7 @@
 """The one place that finds OpenCL devices, builds programs and caches kernels.
 
 Nothing else in lfcl creates contexts or queues. A :class:`Runtime` wraps one
-device: its context, one in-order queue, the programs built from ``kernels/*.cl``
+device: its context, one in-order queue, the programs built from ``lfcl/kernels/*.cl``
 (each built once per context) and the kernel objects fetched from them (each
 fetched once).
 
@@ -113,7 +113,7 @@ def select_device(spec: str | int | None = None) -> cl.Device:
 
 
 def kernel_source(name: str) -> str:
-    """The OpenCL C source ``kernels/<name>.cl`` from the installed package."""
+    """The OpenCL C source ``lfcl/kernels/<name>.cl`` from the installed package."""
     return importlib.resources.files("lfcl.kernels").joinpath(f"{name}.cl").read_text()
 
 
@@ -133,7 +133,7 @@ class Runtime:
         return self.device.name.strip()
 
     def program(self, name: str, defines: tuple = ()) -> cl.Program:
-        """``kernels/<name>.cl`` (after common.cl), built once per set of ``defines``.
+        """``lfcl/kernels/<name>.cl`` (after common.cl), built once per set of ``defines``.
 
         ``defines`` are ``(NAME, value)`` pairs passed as ``-DNAME=value``: sizes the
         compiler should see as constants (the lens pitch).

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from lfcl.depth import depth_scores, estimate_disparity, read_pfm
-from lfcl.noise import from_noise_profile
+from lfcl.noise.model import from_noise_profile
 from lfcl.sim.capture import simulate
 from lfcl.sim.planes import Plane
 

@@ -7,10 +7,10 @@ Two steps:
 
 ``rows`` simulates every training capture (charts, deadleaves and finetexture at seeds 1 and 2; charts
 planes carrying the four training photographs of docs/auto.md at seed 1) at each light level, runs
-Malvar and every candidate through lfcl.evaluate.run_method (as `lfcl process` runs them: the safety
+Malvar and every candidate through lfcl.evaluation.evaluate.run_method (as `lfcl process` runs them: the safety
 net on, every lens solved) and keeps, per capture and level, the raw's noise level and cross-lens
 ratio as auto sees them and each candidate's PSNR gain over Malvar (centre view, mean image) and
-seconds. ``rule`` calls :func:`lfcl.auto.fit_rules` on those rows (the selection lives in the package
+seconds. ``rule`` calls :func:`lfcl.demosaic.auto.fit_rules` on those rows (the selection lives in the package
 so that tests/test_auto.py can check that the shipped file is what these rows give).
 
 Regenerates: lfcl/data/auto_rule.json (and research/auto_rows.json, the rows it was fitted on).
@@ -43,10 +43,10 @@ def training_captures(shared: Path):
 
 
 def make_rows(args) -> list[dict]:
-    from lfcl.auto import parse_candidate
-    from lfcl.evaluate import run_method, simulated_capture
-    from lfcl.lens_ratio import cross_lens_ratio
-    from lfcl.noise import from_noise_profile
+    from lfcl.demosaic.auto import parse_candidate
+    from lfcl.demosaic.lens_ratio import cross_lens_ratio
+    from lfcl.evaluation.evaluate import run_method, simulated_capture
+    from lfcl.noise.model import from_noise_profile
 
     rows = []
     for label, source in training_captures(args.shared):
@@ -93,7 +93,7 @@ def main(argv=None):
         args.output.write_text(json.dumps({"args": {k: str(v) for k, v in vars(args).items()}, "rows": rows},
                                           indent=1))
         return
-    from lfcl.auto import fit_rules
+    from lfcl.demosaic.auto import fit_rules
 
     rows = json.loads(args.rows.read_text())["rows"]
     dropped = {c for c in args.drop.split(",") if c}

@@ -26,14 +26,14 @@ import time
 
 import numpy as np
 
+from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.demosaic.safety_net import apply_safety_net
 from lfcl.device import get_runtime
-from lfcl.evaluate import simulated_capture
+from lfcl.evaluation.evaluate import simulated_capture
+from lfcl.evaluation.metrics import lightfield_scores
 from lfcl.layout import LightFieldShape, planes_to_exchange
-from lfcl.methods import demosaic_lightfield
-from lfcl.metrics import lightfield_scores
-from lfcl.noise import estimate_noise
+from lfcl.noise.model import estimate_noise
 from lfcl.ops.malvar import Malvar
-from lfcl.safety_net import apply_safety_net
 from lfcl.solvers.epi import EPI_SCHEDULE, EpiAdmmSolver, EpiPrior
 from lfcl.solvers.params import AdmmParams
 
@@ -81,7 +81,7 @@ def start_for(kind, runtime, cap, b, noise):
 
     x0 = linear4d_operator(runtime, cap.mosaic, cap.pattern, cap.pitch, (0, 0), noise).forward(b)
     if kind == "guarded":
-        from lfcl.guarded_start import guarded_start
+        from lfcl.demosaic.guarded_start import guarded_start
 
         x0, _ = guarded_start(runtime, x0, malvar, b, cap.pitch, noise)
     return x0

@@ -31,7 +31,7 @@ import numpy as np
 
 from lfcl import __version__
 from lfcl.layout import exchange_to_planes
-from lfcl.noise import from_noise_profile
+from lfcl.noise.model import from_noise_profile
 from lfcl.ops.linear4d import (
     CLASSES,
     Linear4dModel,

@@ -1,4 +1,4 @@
-"""Fit the safety net's threshold NET_K (lfcl/safety_net.py) on training captures only.
+"""Fit the safety net's threshold NET_K (lfcl/demosaic/safety_net.py) on training captures only.
 
 For every training capture (charts, deadleaves and finetexture at seeds 1 and 2; charts planes
 carrying the four training photographs of docs/auto.md, seed 1) and light level, each method runs
@@ -8,7 +8,7 @@ with the best worst case (the lower of the two gains, over every capture, level 
 
     python research/fit_safety_net.py --lenses 48 --shared ../shared
 
-Regenerates: lfcl.safety_net.NET_K (by hand, from the printed table; docs/auto.md "The safety net").
+Regenerates: lfcl.demosaic.safety_net.NET_K (by hand, from the printed table; docs/auto.md "The safety net").
 """
 
 from __future__ import annotations
@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from lfcl.evaluate import simulated_capture
+from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.evaluation.evaluate import simulated_capture
+from lfcl.evaluation.metrics import centre_view, mean_image, psnr
 from lfcl.layout import LightFieldShape, planes_to_exchange
-from lfcl.methods import demosaic_lightfield
-from lfcl.metrics import centre_view, mean_image, psnr
-from lfcl.noise import from_noise_profile
+from lfcl.noise.model import from_noise_profile
 from lfcl.ops.lensguard import guard_lens_means_np
 
 KS = (2.0, 3.0, 4.0, 6.0, 8.0, 12.0, math.inf)

@@ -1,4 +1,4 @@
-"""Measure skipping flat lenses (lfcl/flat_lenses.py, docs/auto.md): each ADMM method with every
+"""Measure skipping flat lenses (lfcl/demosaic/flat_lenses.py, docs/auto.md): each ADMM method with every
 lens solved against the same method leaving the flat lenses out (the default).
 
     python research/flat.py [--lenses 64,160] [--scenes charts,deadleaves] [--lightfield PATH]
@@ -21,12 +21,12 @@ import time
 
 import numpy as np
 
-from lfcl.imageio import write_json
-from lfcl.layout import LightFieldShape, planes_to_exchange
-from lfcl.methods import demosaic_lightfield
-from lfcl.metrics import lightfield_scores
-from lfcl.noise import from_noise_profile
 from lfcl.bench.timing import add_capture_arguments, captures
+from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.evaluation.metrics import lightfield_scores
+from lfcl.io.images import write_json
+from lfcl.layout import LightFieldShape, planes_to_exchange
+from lfcl.noise.model import from_noise_profile
 
 
 def measure(capture, label: str, repeats: int, threshold: float | None = None) -> dict:

@@ -4,9 +4,9 @@ Simulates a capture with microlens vignetting strong enough to leave dark corner
 (a fast microlens: f-number 0.4 puts 32 of the 81 pixels of a 9x9 lens below the
 0.2 response threshold; the CLI's ``--vignetting`` is f/2.8, where none is),
 calibrates the lens response from the capture's own white image as
-``lfcl process --white`` does (lfcl.calib, then lens_response_from_calibration;
+``lfcl process --white`` does (lfcl.grid, then lens_response_from_calibration;
 ``--response white``: the plain lens average of the white image instead,
-lfcl.flatfield.lens_response_from_white),
+lfcl.grid.vignetting.lens_response_from_white),
 flat-fields, starts from Malvar and runs each method with its defaults twice:
 dark pixels out of the data term only (``prior_mask=False``, the old behaviour)
 and out of the prior too (the default). Scores against the truth: PSNR and mean
@@ -23,13 +23,13 @@ import time
 
 import numpy as np
 
-from lfcl.calib import calibrate_array
+from lfcl.demosaic.methods import ADMM_DEFAULTS, admm_params
 from lfcl.device import get_runtime
-from lfcl.flatfield import DEFAULT_THRESHOLD, flat_field, lens_response_from_calibration, lens_response_from_white
+from lfcl.evaluation.metrics import lightfield_colour_scores, lightfield_scores, psnr
+from lfcl.grid import calibrate_array
+from lfcl.grid.vignetting import DEFAULT_THRESHOLD, flat_field, lens_response_from_calibration, lens_response_from_white
 from lfcl.layout import LightFieldShape, planes_to_exchange
-from lfcl.methods import ADMM_DEFAULTS, admm_params
-from lfcl.metrics import lightfield_colour_scores, lightfield_scores, psnr
-from lfcl.noise import from_noise_profile
+from lfcl.noise.model import from_noise_profile
 from lfcl.ops.malvar import Malvar
 from lfcl.solvers.admm import AdmmSolver
 

@@ -18,12 +18,12 @@ import time
 
 import numpy as np
 
+from lfcl.demosaic.methods import ADMM_DEFAULTS
 from lfcl.device import get_runtime
-from lfcl.evaluate import capture_in_memory
+from lfcl.evaluation.evaluate import capture_in_memory
+from lfcl.evaluation.metrics import lightfield_scores
 from lfcl.layout import LightFieldShape, planes_to_exchange
-from lfcl.methods import ADMM_DEFAULTS
-from lfcl.metrics import lightfield_scores
-from lfcl.noise import from_noise_profile
+from lfcl.noise.model import from_noise_profile
 from lfcl.ops.malvar import Malvar
 from lfcl.solvers.admm import AdmmSolver
 from lfcl.solvers.params import AdmmParams

@@ -15,12 +15,12 @@ from __future__ import annotations
 import argparse
 import time
 
+from lfcl.demosaic.methods import ADMM_DEFAULTS
 from lfcl.device import get_runtime
-from lfcl.evaluate import load_capture
+from lfcl.evaluation.evaluate import load_capture
+from lfcl.evaluation.metrics import lightfield_colour_scores, lightfield_scores
 from lfcl.layout import LightFieldShape, planes_to_exchange
-from lfcl.methods import ADMM_DEFAULTS
-from lfcl.metrics import lightfield_colour_scores, lightfield_scores
-from lfcl.noise import from_noise_profile
+from lfcl.noise.model import from_noise_profile
 from lfcl.ops.malvar import Malvar
 from lfcl.solvers.admm import AdmmSolver
 from lfcl.solvers.params import AdmmParams

@@ -131,8 +131,8 @@ def test_bad_parameters_raise():
 def test_admm_uv_in_bands_of_lens_rows_equals_the_whole(rng):
     # The (u, v) prior couples no two lenses, so bands (with odd lens-row offsets,
     # hence shifted Bayer phases) must reproduce the single solve.
-    from lfcl.methods import demosaic_lightfield
-    from lfcl.noise import NoiseEstimate
+    from lfcl.demosaic.methods import demosaic_lightfield
+    from lfcl.noise.model import NoiseEstimate
 
     b, _ = smooth_lightfield_mosaic(rng, 7, 5, 9, 9, noise=0.03)
     noise = NoiseEstimate(0.0, 0.03**2, 0.03, "test")
@@ -144,7 +144,7 @@ def test_admm_uv_in_bands_of_lens_rows_equals_the_whole(rng):
 
 
 def test_coupled_priors_say_why_they_cannot_run_in_bands(rng):
-    from lfcl.methods import demosaic_lightfield
+    from lfcl.demosaic.methods import demosaic_lightfield
 
     b, _ = smooth_lightfield_mosaic(rng, 4, 4, 9, 9)
     with pytest.raises(ValueError, match="couples\\s+neighbouring lenses|couples neighbouring lenses"):
@@ -362,7 +362,7 @@ def test_an_isolated_bright_pixel_falls_back_to_cg(runtime, rng):
 
 
 def test_cross_channel_methods_follow_sigma():
-    from lfcl.methods import ADMM_DEFAULTS, admm_params
+    from lfcl.demosaic.methods import ADMM_DEFAULTS, admm_params
 
     for method in ("admm-uv-xc", "admm-uvst-xc"):
         d = ADMM_DEFAULTS[method]
@@ -377,8 +377,8 @@ def test_cross_channel_methods_follow_sigma():
 
 def test_admm_uv_xc_in_bands_of_lens_rows_equals_the_whole(rng):
     # The cross-channel prior over (u, v) couples colours, not lenses: bands stay exact.
-    from lfcl.methods import demosaic_lightfield
-    from lfcl.noise import NoiseEstimate
+    from lfcl.demosaic.methods import demosaic_lightfield
+    from lfcl.noise.model import NoiseEstimate
 
     b, _ = smooth_lightfield_mosaic(rng, 5, 4, 9, 9, noise=0.03)
     noise = NoiseEstimate(0.0, 0.03**2, 0.03, "test")

@@ -1,4 +1,4 @@
-"""`--method auto`: the rule table, its fit, and the demosaic it runs (lfcl/auto.py)."""
+"""`--method auto`: the rule table, its fit, and the demosaic it runs (lfcl/demosaic/auto.py)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lfcl.auto import choose, fit_rule, fit_rules, load_rule, parse_candidate, row_gain, row_merit
-from lfcl.methods import demosaic_lightfield
-from lfcl.noise import NoiseEstimate
+from lfcl.demosaic.auto import choose, fit_rule, fit_rules, load_rule, parse_candidate, row_gain, row_merit
+from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.noise.model import NoiseEstimate
 
 ROWS_FILE = Path(__file__).resolve().parents[1] / "research" / "auto_rows.json"
 
@@ -127,7 +127,7 @@ def test_shipped_rule_is_what_the_fit_gives_on_its_training_rows():
     (["center", "mean"], "both"), (["lightfield"], "both"), (["views"], "both"), (["center", "views-each"], "both"),
 ])
 def test_view_for_outputs(outputs, view):
-    from lfcl.auto import view_for_outputs
+    from lfcl.demosaic.auto import view_for_outputs
 
     assert view_for_outputs(outputs) == view
 
@@ -139,7 +139,7 @@ def test_choose_records_the_view_and_refuses_an_unknown_one():
     assert choose(0.004).view == "both" and "whichever is worse" in choose(0.004).reason
     with pytest.raises(ValueError, match="view must be one of both, center, mean"):
         choose(0.004, view="views")
-    from lfcl.stages import Demosaic
+    from lfcl.pipeline.stages import Demosaic
 
     with pytest.raises(ValueError, match="^Demosaic: auto's view must be one of"):
         Demosaic("auto", auto_view="centre")
@@ -168,7 +168,7 @@ def test_bands_of_lens_rows_each_stop_on_their_own_rule(rng):
 
 @pytest.mark.parametrize("db", [0.05, 0.5, 2.0])
 def test_tolerance_db_round_trips_and_bounds_the_change(db):
-    from lfcl.methods import admm_params, change_for_tolerance_db, tolerance_db_for_change
+    from lfcl.demosaic.methods import admm_params, change_for_tolerance_db, tolerance_db_for_change
 
     assert tolerance_db_for_change(change_for_tolerance_db(db)) == pytest.approx(db)
     # a change c of an image with rms error e >= sigma moves PSNR by at most db
@@ -179,7 +179,7 @@ def test_tolerance_db_round_trips_and_bounds_the_change(db):
 
 
 def test_tolerance_db_must_be_positive():
-    from lfcl.methods import change_for_tolerance_db
+    from lfcl.demosaic.methods import change_for_tolerance_db
 
     with pytest.raises(ValueError, match="dB > 0"):
         change_for_tolerance_db(0.0)
@@ -189,11 +189,11 @@ def test_tolerance_db_must_be_positive():
                                             ("admm-uv-xc@1:guarded", ("admm-uv-xc", 1.0)),
                                             ("linear4d", ("admm-uv", 1.0))])
 def test_auto_without_linear4d_coefficients_for_the_pitch_runs_from_malvar(rng, monkeypatch, candidate, ran):
-    import lfcl.auto
+    import lfcl.demosaic.auto
 
     band = {"sigma_from": 0.0, "sigma_to": 1.0, "candidate": candidate, "worst_gain_db": 0.0, "median_gain_db": 0.0,
             "tie_db": 0.1, "captures": 1}
-    monkeypatch.setattr(lfcl.auto, "load_rules", lambda: {"rules": {"both": [band]}})
+    monkeypatch.setattr(lfcl.demosaic.auto, "load_rules", lambda: {"rules": {"both": [band]}})
     mosaic = (0.3 + 0.02 * rng.standard_normal((25, 25))).astype(np.float32)  # 5x5 lenses of 5x5 pixels
     noise = NoiseEstimate(gain=0.0, floor=0.004**2, sigma=0.004, source="test")
     auto = demosaic_lightfield(mosaic, "GRBG", (5, 5), "auto", noise=noise)

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from lfcl.batch_inputs import capture_names, expand_inputs
-from lfcl.batch_record import LOCK, RECORD, BatchLock
+from lfcl.batch.inputs import capture_names, expand_inputs
+from lfcl.batch.record import LOCK, RECORD, BatchLock
 from lfcl.cli import cli
 
 GOOD = [f"cap{i}" for i in range(5)]
@@ -84,7 +84,7 @@ def test_a_corrupt_capture_fails_alone(first_batch):
 
 
 def test_one_opencl_runtime_per_worker(first_batch, cluster):
-    from lfcl.batch_worker import worker_info
+    from lfcl.batch.worker import worker_info
 
     _, result = first_batch
     info = {w["pid"]: w for w in cluster.run(worker_info).values()}
@@ -186,7 +186,7 @@ def test_an_interrupted_batch_resumes(captures, tmp_path):
         expected = "skipped" if name in finished else "done"
         assert results[name]["status"] == expected, results[name]
     # PoCL's threads: the cores shared between the two local workers
-    from lfcl.batch_cluster import local_size
+    from lfcl.batch.cluster import local_size
 
     threads = local_size(2)[1]
     assert summary["cluster"]["pocl_threads"] == threads

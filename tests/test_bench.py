@@ -149,7 +149,7 @@ def test_bench_matrix_rows_and_the_worst_cell_first(tmp_path):
                                                            ("finetexture", "admm-uvst"), ("finetexture", "admm-uv")]
     for row in rows:
         assert row["lux"] == 12 and row["net"] is not None  # the safety net ran and said on how many lenses
-    from lfcl.evaluate import run_method, simulated_capture
+    from lfcl.evaluation.evaluate import run_method, simulated_capture
 
     capture = simulated_capture(8, 12, seed=7, scene="charts")  # the matrix's held-out seed
     malvar, uvst = run_method(capture, "malvar"), run_method(capture, "admm-uvst")

@@ -1,4 +1,4 @@
-"""Lenslet calibration (lfcl.calib, ``lfcl calibrate``) and the white images of general grids it is tested on."""
+"""Lenslet calibration (lfcl.grid, ``lfcl calibrate``) and the white images of general grids it is tested on."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from lfcl.calib import (
+from lfcl.grid import (
     Calibration,
     CalibrationError,
     LensGrid,
@@ -46,8 +46,8 @@ def cli():
     except ImportError:  # another command module is broken right now: test ours alone
         import click
 
-        from lfcl.commands.calibrate import command
-        from lfcl.commands.simulate import command as simulate_command
+        from lfcl.cli.commands.calibrate import command
+        from lfcl.cli.commands.simulate import command as simulate_command
 
         group = click.Group("lfcl", commands={"calibrate": command, "simulate": simulate_command})
     return group

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from lfcl.commands.demosaic import command
+from lfcl.cli.commands.demosaic import command
 
 SHARED = Path(os.environ.get("LFCL_SHARED", Path(__file__).resolve().parents[2] / "shared"))
 LIGHTHOUSE_CFA = SHARED / "data" / "lighthouse" / "Lighthouse_CFA_GRBG.exr"
@@ -47,7 +47,7 @@ def assert_failed_cleanly(result, folder: Path, expected: str):
 
 
 def test_lighthouse_exr_equals_malvar(tmp_path):
-    from lfcl.imageio import read_image
+    from lfcl.io.images import read_image
     from lfcl.ops.malvar import malvar, malvar_np
 
     source = shared_file(LIGHTHOUSE_CFA)
@@ -77,9 +77,9 @@ def test_lighthouse_exr_equals_malvar(tmp_path):
 
 
 def test_dng_without_pattern(tmp_path):
-    from lfcl.imageio import read_image
+    from lfcl.io.images import read_image
+    from lfcl.io.raw import read_mosaic
     from lfcl.ops.malvar import malvar
-    from lfcl.raw import read_mosaic
 
     source = shared_file(COLORCHART)
     out = tmp_path / "colorchart.exr"
@@ -103,7 +103,7 @@ def test_dng_without_pattern(tmp_path):
 
 
 def test_png_output(tmp_path):
-    from lfcl.imageio import read_image
+    from lfcl.io.images import read_image
 
     out = tmp_path / "chart.png"
     result = run(shared_file(COLORCHART), "-o", out)
@@ -153,7 +153,7 @@ def test_not_bayer_input(tmp_path):
 
 
 def test_rgb_image_input(tmp_path):
-    from lfcl.imageio import write_image
+    from lfcl.io.images import write_image
 
     indir, outdir = tmp_path / "in", tmp_path / "out"
     indir.mkdir()
@@ -190,7 +190,7 @@ def test_bogus_device(tmp_path):
 
 def test_synthetic_mosaic_without_shared_data(tmp_path):
     """A small float mosaic written here: the command works without ../shared."""
-    from lfcl.imageio import read_image, write_image
+    from lfcl.io.images import read_image, write_image
     from lfcl.ops.malvar import malvar_np
 
     mosaic = np.random.default_rng(3).uniform(-0.05, 1.2, (12, 16)).astype(np.float32)
@@ -214,7 +214,7 @@ def test_libraw_messages_stay_in_the_one_line(tmp_path):
     truncated.write_bytes(shared_file(COLORCHART).read_bytes()[:10 * 1024])
     outdir = tmp_path / "out"
     outdir.mkdir()
-    code = "from lfcl.commands.demosaic import command; command()"
+    code = "from lfcl.cli.commands.demosaic import command; command()"
     proc = subprocess.run(
         [sys.executable, "-c", code, str(truncated), "-o", str(outdir / "x.exr")],
         capture_output=True, text=True, timeout=120,

@@ -1,4 +1,4 @@
-"""Camera RGB -> sRGB previews (lfcl.colour) against colour-science."""
+"""Camera RGB -> sRGB previews (lfcl.outputs.previews) against colour-science."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import colour
 import numpy as np
 import pytest
 
-from lfcl.colour import LUMA, TARGET, ColourPipeline, d65_xyz
+from lfcl.outputs.previews import LUMA, TARGET, ColourPipeline, d65_xyz
 
 XYZ_TO_SRGB = np.asarray(colour.RGB_COLOURSPACES["sRGB"].matrix_XYZ_to_RGB, np.float64)
 # A real camera's ColorMatrix (Adobe's for the Canon EOS 5D Mark II, / 10000): camera from XYZ

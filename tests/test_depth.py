@@ -11,7 +11,7 @@ from conftest import shared_path
 
 from lfcl.depth import badpix, candidates, depth_scores, estimate_disparity, mse100, read_pfm
 from lfcl.depth.cost import CostVolume, cost_volume_np
-from lfcl.noise import NoiseEstimate
+from lfcl.noise.model import NoiseEstimate
 from lfcl.sim.capture import simulate
 from lfcl.sim.deadleaves import DeadLeavesTexture, _texture_box
 from lfcl.sim.planes import Plane

@@ -7,8 +7,8 @@ import json
 import pytest
 from click.testing import CliRunner
 
-from lfcl.commands import devices as devices_module
-from lfcl.commands.devices import command
+from lfcl.cli.commands import devices as devices_module
+from lfcl.cli.commands.devices import command
 from lfcl.device import INSTALL_HINT, DeviceError, list_devices, select_device
 
 

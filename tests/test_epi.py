@@ -278,8 +278,8 @@ def test_solver_refuses_what_it_cannot_do(runtime, rng):
 
 def test_method_admm_epi_runs_and_records_the_disparity(runtime, rng):
     """lfcl.methods: admm-epi estimates the disparity from the raw (lfcl.depth), solves, and says what it used."""
-    from lfcl.methods import demosaic_lightfield
-    from lfcl.noise import NoiseEstimate
+    from lfcl.demosaic.methods import demosaic_lightfield
+    from lfcl.noise.model import NoiseEstimate
     from lfcl.solvers.epi import epi_setting
 
     S, T, U, V = 10, 10, 9, 9

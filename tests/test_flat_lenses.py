@@ -1,4 +1,4 @@
-"""Skipping flat lenses (lfcl/flat_lenses.py): the test, the packing, and the solve around them."""
+"""Skipping flat lenses (lfcl/demosaic/flat_lenses.py): the test, the packing, and the solve around them."""
 
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ import pytest
 from click.testing import CliRunner
 
 from lfcl.cli import cli
-from lfcl.flat_lenses import LADDER_STEPS, fill_flat, flat_lenses, pack_lenses
+from lfcl.demosaic.flat_lenses import LADDER_STEPS, fill_flat, flat_lenses, pack_lenses
+from lfcl.demosaic.methods import demosaic_lightfield
 from lfcl.layout import channel_map
-from lfcl.methods import demosaic_lightfield
-from lfcl.noise import NoiseEstimate
+from lfcl.noise.model import NoiseEstimate
 from lfcl.ops.malvar import malvar_np
 from lfcl.solvers.params import AdmmParams
 from lfcl.solvers.reference import admm_reference
@@ -193,7 +193,7 @@ def test_bands_of_the_packed_mosaic_give_the_same_result(mixed):
 
 
 def test_vignetted_lenses_fill_their_dark_pixels_too(mixed):
-    from lfcl.flatfield import DEFAULT_THRESHOLD
+    from lfcl.grid.vignetting import DEFAULT_THRESHOLD
 
     mosaic, _ = mixed
     v, u = np.meshgrid(np.arange(9) - 4, np.arange(9) - 4)

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lfcl.flatfield import flat_field, lens_response_from_white
+from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.evaluation.metrics import lightfield_scores
+from lfcl.grid.vignetting import flat_field, lens_response_from_white
 from lfcl.layout import LightFieldShape, planes_to_exchange
-from lfcl.methods import demosaic_lightfield
-from lfcl.metrics import lightfield_scores
-from lfcl.noise import from_noise_profile
+from lfcl.noise.model import from_noise_profile
 from lfcl.sim import simulate
 
 

@@ -4,13 +4,13 @@ Byte strings (mutations of a small valid DNG written with
 :func:`lfcl.sim.dng.write_dng`, of small PNG / EXR / TIFF mosaics, and pure random
 bytes) are written to a file with each extension and fed to
 
-* :func:`lfcl.raw.read_mosaic`: it returns a valid Mosaic (finite float32 data of
+* :func:`lfcl.io.raw.read_mosaic`: it returns a valid Mosaic (finite float32 data of
   the shape the header declares, finite metadata) or raises ``ValueError`` /
   ``FileNotFoundError`` with a one-line message; nothing else;
 * ``lfcl demosaic FILE --pattern GRBG -o OUT.exr``: no traceback; either it writes
   OUT and nothing else, or it prints exactly one ``lfcl: error:`` line, exits
   non-zero and creates nothing;
-* :func:`lfcl.calib.load_calibration` with mutated ``cal.json`` documents.
+* :func:`lfcl.grid.load_calibration` with mutated ``cal.json`` documents.
 
 ``LFCL_FUZZ_EXAMPLES`` scales the number of examples (default: a quick run).
 Hostile files found by hand, and the reasons behind each fix, are in
@@ -31,8 +31,8 @@ from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from lfcl.io.raw import IMAGE_EXTENSIONS, Mosaic, read_mosaic
 from lfcl.layout import PATTERNS
-from lfcl.raw import IMAGE_EXTENSIONS, Mosaic, read_mosaic
 
 SCALE = float(os.environ.get("LFCL_FUZZ_EXAMPLES", "1"))
 SETTINGS = {"deadline": None, "database": None, "derandomize": False,
@@ -42,7 +42,7 @@ SENSOR = (32, 48)
 
 
 def _write_seeds(folder: Path) -> dict[str, bytes]:
-    from lfcl.imageio import write_image
+    from lfcl.io.images import write_image
     from lfcl.sim.dng import write_dng
 
     values = np.random.default_rng(3).integers(64, 4000, SENSOR).astype(np.uint16)
@@ -241,7 +241,7 @@ def _paths(doc, prefix=()):
 
 
 def _base_documents():
-    from lfcl.calib import calibration_from_pitch, calibration_to_dict
+    from lfcl.grid import calibration_from_pitch, calibration_to_dict
 
     plain = json.loads(json.dumps(calibration_to_dict(calibration_from_pitch(9, (96, 120), pattern="GRBG"))))
     weighted = json.loads(json.dumps(plain))
@@ -254,7 +254,7 @@ def _base_documents():
 
 
 def test_fuzz_calibration_json(tmp_path_factory):
-    from lfcl.calib import load_calibration
+    from lfcl.grid import load_calibration
 
     folder = tmp_path_factory.mktemp("cal")
     bases = _base_documents()

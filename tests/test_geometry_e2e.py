@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from lfcl.calib import calibrate_array, load_calibration
-from lfcl.grid_demosaic import demosaic_resampled
-from lfcl.metrics import lightfield_scores, psnr
-from lfcl.noise import from_noise_profile
+from lfcl.demosaic.resampled import demosaic_resampled
+from lfcl.evaluation.metrics import lightfield_scores, psnr
+from lfcl.grid import calibrate_array, load_calibration
+from lfcl.noise.model import from_noise_profile
 from lfcl.sim.capture import simulate_grid
 
 CASES = {"rotated": ("square", 9.4, 0.7, (0.3, -0.2)), "hex": ("hex", 9.4, 0.7, (0.3, -0.2))}
@@ -103,7 +103,7 @@ def test_views_in_the_wrong_order_fall_below_the_inner_floor(calibrated, demosai
 
 def test_cli_simulate_calibrate_and_demosaic_from_files(tmp_path):
     from lfcl.cli import cli
-    from lfcl.raw import read_mosaic
+    from lfcl.io.raw import read_mosaic
 
     sim = tmp_path / "sim"
     result = CliRunner().invoke(cli, ["simulate", "--grid", "hex", "--pitch", "9.4", "--rotation", "0.7",

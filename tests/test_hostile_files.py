@@ -1,13 +1,13 @@
 """Hostile input files (repository issue "Robustness", item 2).
 
 Truncated, corrupted, random, empty, misnamed, huge-declaring, unreadable and
-not-a-file inputs, and malformed ``cal.json``, through :func:`lfcl.raw.read_mosaic`,
-:func:`lfcl.calib.load_calibration` and the command line (``lfcl demosaic``,
+not-a-file inputs, and malformed ``cal.json``, through :func:`lfcl.io.raw.read_mosaic`,
+:func:`lfcl.grid.load_calibration` and the command line (``lfcl demosaic``,
 ``lfcl process``, ``lfcl calibrate``, ``lfcl process --calibration``).
 
 The contract:
 
-* ``read_mosaic`` returns a valid :class:`~lfcl.raw.Mosaic` (finite float32 data of
+* ``read_mosaic`` returns a valid :class:`~lfcl.io.raw.Mosaic` (finite float32 data of
   the declared shape, finite metadata) or raises ``ValueError`` /
   ``FileNotFoundError`` with a one-line message; nothing else.
 * The CLI shows no traceback, prints exactly one line, starting ``lfcl: error:``,
@@ -37,9 +37,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from lfcl.calib import calibration_from_pitch, calibration_to_dict, load_calibration
+from lfcl.grid import calibration_from_pitch, calibration_to_dict, load_calibration
+from lfcl.io.raw import IMAGE_EXTENSIONS, Mosaic, read_mosaic
 from lfcl.layout import PATTERNS
-from lfcl.raw import IMAGE_EXTENSIONS, Mosaic, read_mosaic
 
 SHARED = Path(os.environ.get("LFCL_SHARED", Path(__file__).resolve().parents[2] / "shared"))
 REALDATA = SHARED / "realdata"
@@ -71,7 +71,7 @@ def _sensor_values() -> np.ndarray:
 
 def write_seed(kind: str, path: Path) -> Path:
     """A small valid mosaic of ``kind`` (dng, png, exr, tif) at ``path``."""
-    from lfcl.imageio import write_image
+    from lfcl.io.images import write_image
     from lfcl.sim.dng import write_dng
 
     values = _sensor_values()
@@ -263,7 +263,7 @@ def cli_commands(path: Path, out: Path):
 
 
 def process_has_calibration() -> bool:
-    from lfcl.commands.process import command
+    from lfcl.cli.commands.process import command
 
     return any(p.name == "calibration" for p in command.params)
 
@@ -391,7 +391,7 @@ _MEMORY_SCRIPT = textwrap.dedent("""
     from pathlib import Path
     tracemalloc.start()
     import numpy, OpenImageIO, rawpy, tifffile
-    from lfcl.raw import read_mosaic
+    from lfcl.io.raw import read_mosaic
     cases = json.loads(sys.argv[1])
     read_mosaic(cases[0]["seed"], "GRBG")  # warm the readers up
     tracemalloc.reset_peak()
@@ -777,7 +777,7 @@ def test_malformed_calibration_through_process(tmp_path, seeds, name):
 
 
 def test_oversized_calibration_is_not_read(tmp_path, monkeypatch):
-    import lfcl.calib.io as calib_io
+    import lfcl.grid.files as calib_io
 
     monkeypatch.setattr(calib_io, "MAX_FILE_BYTES", 1000)
     path = _write_cal(tmp_path / "cal.json", json.dumps(_valid_cal()) + " " * 2000)
@@ -789,7 +789,7 @@ def test_oversized_calibration_is_not_read(tmp_path, monkeypatch):
 
 
 def test_a_failed_write_leaves_no_file_and_no_folder(tmp_path):
-    from lfcl.imageio import atomic_path, write_image
+    from lfcl.io.images import atomic_path, write_image
 
     target = tmp_path / "new" / "deeper" / "o.exr"
     with pytest.raises(RuntimeError), atomic_path(target) as tmp:

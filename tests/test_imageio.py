@@ -8,7 +8,7 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from lfcl.imageio import read_image, write_image
+from lfcl.io.images import read_image, write_image
 
 
 @pytest.mark.parametrize("suffix,tolerance", [(".exr", 0), (".tif", 1 / 65535), (".png", 1 / 255)])

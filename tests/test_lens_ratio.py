@@ -1,4 +1,4 @@
-"""The cross-lens ratio (lfcl/lens_ratio.py) against a plain loop, and what auto does with it."""
+"""The cross-lens ratio (lfcl/demosaic/lens_ratio.py) against a plain loop, and what auto does with it."""
 
 from __future__ import annotations
 
@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from lfcl.auto import choose, fit_rule
-from lfcl.flatfield import DEFAULT_THRESHOLD
-from lfcl.lens_ratio import BAND_ROWS, cross_lens_ratio
-from lfcl.noise import NoiseEstimate
+from lfcl.demosaic.auto import choose, fit_rule
+from lfcl.demosaic.lens_ratio import BAND_ROWS, cross_lens_ratio
+from lfcl.grid.vignetting import DEFAULT_THRESHOLD
+from lfcl.noise.model import NoiseEstimate
 
 NOISE = NoiseEstimate(gain=2e-4, floor=1e-6, sigma=0.01, source="raw")
 
@@ -144,7 +144,7 @@ def test_auto_says_when_the_content_lies_outside_what_its_band_was_fitted_on():
 
 
 def test_auto_records_the_ratio_of_the_raw(rng):
-    from lfcl.methods import demosaic_lightfield
+    from lfcl.demosaic.methods import demosaic_lightfield
 
     flat_lenses = rng.random((20, 20, 1, 1)) * np.ones((1, 1, 9, 9))
     flat_lenses[:, :, :, 4] += 0.2

@@ -1,4 +1,4 @@
-"""The guarded start's device half (kernels/lensguard.cl) against its float64 references."""
+"""The guarded start's device half (lfcl/kernels/lensguard.cl) against its float64 references."""
 
 from __future__ import annotations
 

@@ -404,7 +404,7 @@ def test_public_function_checks_the_pitch(runtime):
 
 
 def test_public_function_matches_numpy_with_a_given_noise(runtime):
-    from lfcl.noise import NoiseEstimate
+    from lfcl.noise.model import NoiseEstimate
 
     model = load_model()
     mosaic, _ = _case("public", (2, 3))
@@ -417,8 +417,8 @@ def test_public_function_matches_numpy_with_a_given_noise(runtime):
 
 
 def test_demosaic_lightfield_runs_linear4d(runtime):
-    from lfcl.methods import demosaic_lightfield
-    from lfcl.noise import NoiseEstimate
+    from lfcl.demosaic.methods import demosaic_lightfield
+    from lfcl.noise.model import NoiseEstimate
     from lfcl.sim import simulate
 
     capture = simulate("charts", lenses=(4, 4), lux=12.0, seed=0)

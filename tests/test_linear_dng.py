@@ -1,4 +1,4 @@
-"""LinearRaw DNG outputs (lfcl.linear_dng, ``--format dng``): pixels, tags, and raw editors that open them.
+"""LinearRaw DNG outputs (lfcl.io.linear_dng, ``--format dng``): pixels, tags, and raw editors that open them.
 
 darktable-cli and rawtherapee-cli come from Debian (`apt-get install darktable rawtherapee`,
 .ci/run installs them): a test that cannot find one skips with the reason, and fails when
@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 import tifffile
 
-from lfcl.linear_dng import COLOUR_TAGS, WHITE_LEVEL, DngCamera, write_linear_dng
-from lfcl.metrics import centre_view, mean_image
-from lfcl.outputs import plan_outputs, write_outputs
-from lfcl.stages import Decode, Demosaic, Grid, Outputs
+from lfcl.evaluation.metrics import centre_view, mean_image
+from lfcl.io.linear_dng import COLOUR_TAGS, WHITE_LEVEL, DngCamera, write_linear_dng
+from lfcl.outputs.files import plan_outputs, write_outputs
+from lfcl.pipeline.stages import Decode, Demosaic, Grid, Outputs
 
 # Canon EOS 5D Mark II, dcraw's adobe_coeff (XYZ D65 -> camera, / 10000): a real matrix, far from sRGB.
 CANON_XYZ_TO_CAMERA = np.array([4716, 603, -830, -7798, 15474, 2480, -1496, 1937, 6651]).reshape(3, 3) / 10000
@@ -70,7 +70,7 @@ def demosaiced(tmp_path_factory):
 
 def test_pixels_equal_the_exr(demosaiced, tmp_path):
     """The DNG's codes are round(65535 x the EXR's values), clipped to [0, 65535]."""
-    from lfcl.imageio import read_image
+    from lfcl.io.images import read_image
 
     _, dem = demosaiced
     Outputs("center,mean,refocus", refocus="0.5", fmt="exr", previews=False)(dem, tmp_path / "exr")
@@ -112,8 +112,8 @@ def test_layout_and_tags_round_trip(demosaiced, tmp_path):
 
 def test_carries_a_dngs_second_matrix_and_forward_matrices(tmp_path):
     """An input DNG's ColorMatrix2, ForwardMatrix1/2, illuminants and BaselineExposure come through unchanged."""
-    from lfcl.linear_dng import rationals
-    from lfcl.raw import read_mosaic
+    from lfcl.io.linear_dng import rationals
+    from lfcl.io.raw import read_mosaic
     from lfcl.sim.dng import dng_tags
 
     mosaic = (np.random.default_rng(0).random((48, 64)) * 3000 + 64).astype(np.uint16)
@@ -144,7 +144,7 @@ def test_carries_a_dngs_second_matrix_and_forward_matrices(tmp_path):
 
 def test_camera_from_libraw_metadata_and_without_any():
     """A raw without DNG colour tags: LibRaw's cam_xyz as ColorMatrix1 (D65), neutral = 1 / the multipliers."""
-    from lfcl.raw import Mosaic
+    from lfcl.io.raw import Mosaic
 
     mosaic = Mosaic(data=np.zeros((4, 4), np.float32), pattern="RGGB", as_shot_wb=CANON_WB,
                     xyz_to_camera=CANON_XYZ_TO_CAMERA.astype(np.float32), camera="Canon EOS 5D Mark II")
@@ -171,7 +171,7 @@ def test_bad_input_is_one_line(tmp_path):
 
 def test_plan_views_each_and_cli_choices(tmp_path):
     """Every image output becomes a DNG (views-each included); process and batch take --format dng."""
-    from lfcl.commands import batch, process
+    from lfcl.cli.commands import batch, process
 
     lightfield = (np.random.default_rng(1).random((5, 6, 3, 3, 3)) * 0.5).astype(np.float32)
     plan = plan_outputs(lightfield, ["center", "mean", "views", "views-each", "refocus"], slopes=[0.5], fmt="dng",

@@ -1,4 +1,4 @@
-"""Colour-artefact metrics (lfcl/metrics.py, docs/colour-metrics.md): CIEDE2000 and false colour."""
+"""Colour-artefact metrics (lfcl/evaluation/metrics.py, docs/colour-metrics.md): CIEDE2000 and false colour."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import colour
 import numpy as np
 import pytest
 
-from lfcl.evaluate import format_sweep, format_table
-from lfcl.metrics import (
+from lfcl.evaluation.evaluate import format_sweep, format_table
+from lfcl.evaluation.metrics import (
     COLOUR_KEYS,
     camera_to_lab,
     centre_view,

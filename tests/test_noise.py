@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lfcl.noise import estimate_noise, from_noise_profile
+from lfcl.noise.model import estimate_noise, from_noise_profile
 from lfcl.sim import simulate
 
 

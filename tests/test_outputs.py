@@ -1,4 +1,4 @@
-"""The output stage (lfcl.outputs) and `lfcl process` end to end on a small simulated capture."""
+"""The output stage (lfcl.outputs.files) and `lfcl process` end to end on a small simulated capture."""
 
 from __future__ import annotations
 
@@ -10,11 +10,11 @@ import pytest
 from click.testing import CliRunner
 
 from lfcl.cli import cli
-from lfcl.imageio import read_image
+from lfcl.evaluation.metrics import centre_view, mean_image
+from lfcl.io.images import read_image
 from lfcl.layout import tiled_views
-from lfcl.metrics import centre_view, mean_image
-from lfcl.outputs import KINDS, parse_outputs, plan_outputs, view_name, write_outputs
-from lfcl.refocus import refocus
+from lfcl.outputs.files import KINDS, parse_outputs, plan_outputs, view_name, write_outputs
+from lfcl.outputs.refocus import refocus
 
 S, T, U, V = 12, 14, 9, 9
 
@@ -67,7 +67,7 @@ def test_plan_images_and_names(lightfield):
 
 
 def test_cli_lists_the_same_kinds():
-    from lfcl.commands.process import OUTPUTS
+    from lfcl.cli.commands.process import OUTPUTS
 
     assert OUTPUTS == KINDS
 
@@ -84,11 +84,11 @@ def test_parse_outputs_rejects(text, message):
 
 
 def test_write_is_all_or_nothing(lightfield, tmp_path, monkeypatch):
-    import lfcl.imageio
+    import lfcl.io.images
 
     plan = plan_outputs(lightfield, ["center", "mean", "views"], previews=True)
     calls = []
-    real = lfcl.imageio.write_image
+    real = lfcl.io.images.write_image
 
     def flaky(path, *args, **kwargs):
         calls.append(path)
@@ -96,7 +96,7 @@ def test_write_is_all_or_nothing(lightfield, tmp_path, monkeypatch):
             raise OSError(f"cannot write {path}: disk full")
         return real(path, *args, **kwargs)
 
-    monkeypatch.setattr(lfcl.imageio, "write_image", flaky)
+    monkeypatch.setattr(lfcl.io.images, "write_image", flaky)
     out = tmp_path / "new" / "out"
     with pytest.raises(OSError, match="disk full"):
         write_outputs(out, plan.files)
@@ -243,7 +243,7 @@ def test_white_image_calibrates_first(capture, tmp_path):
     summary = json.loads(result.output)
     assert summary["calibration"]["how"] == "--white" and "calibrate" in summary["seconds"]
     assert summary["geometry"]["pitch"] == [9, 9] and summary["lenses"] == [S, T]
-    # the white image's lens response flat-fields the raw (lfcl/flatfield.py)
+    # the white image's lens response flat-fields the raw (lfcl/grid/vignetting.py)
     response = np.asarray(summary["flat_field"]["lens_response"])
     assert response.shape == (9, 9) and response.max() == pytest.approx(1.0, abs=1e-3)
 

@@ -9,8 +9,8 @@ import pytest
 from click.testing import CliRunner
 
 from lfcl.cli import cli
-from lfcl.imageio import read_image
-from lfcl.metrics import centre_view, lightfield_scores
+from lfcl.evaluation.metrics import centre_view, lightfield_scores
+from lfcl.io.images import read_image
 
 
 @pytest.fixture(scope="module")
@@ -124,9 +124,9 @@ def test_the_progress_bar_takes_every_method_name():
     """`lfcl process`'s bar: its total for any name of METHODS (auto chooses during the run: no total)."""
     from types import SimpleNamespace
 
-    from lfcl.commands.process import IterationBar, iteration_total
-    from lfcl.method_names import METHODS
-    from lfcl.methods import ADMM_DEFAULTS
+    from lfcl.cli.commands.process import IterationBar, iteration_total
+    from lfcl.demosaic.methods import ADMM_DEFAULTS
+    from lfcl.demosaic.names import METHODS
 
     for method in METHODS:
         cap = ADMM_DEFAULTS[method].max_iter if method in ADMM_DEFAULTS else None

@@ -22,10 +22,10 @@ import pytest
 from click.testing import CliRunner
 
 from lfcl.cli import cli
-from lfcl.imageio import read_image
+from lfcl.evaluation.metrics import centre_view, lightfield_scores, mean_image, psnr
+from lfcl.io.images import read_image
 from lfcl.layout import tiled_views
-from lfcl.metrics import centre_view, lightfield_scores, mean_image, psnr
-from lfcl.refocus import refocus
+from lfcl.outputs.refocus import refocus
 
 CENTRE_FLOOR, MEAN_FLOOR, INNER_FLOOR = 53.0, 60.0, 53.5
 ALIGNED_MEAN_FLOOR = 50.0
@@ -134,11 +134,11 @@ def test_white_image_path_matches_the_calibration_file(captures, processed, tmp_
 
 
 def test_an_aligned_calibration_keeps_the_exact_slicing(captures, processed):
-    from lfcl.calib import load_calibration
-    from lfcl.flatfield import lens_response_from_calibration
+    from lfcl.demosaic.methods import demosaic_lightfield
+    from lfcl.grid import load_calibration
+    from lfcl.grid.vignetting import lens_response_from_calibration
+    from lfcl.io.raw import read_mosaic
     from lfcl.layout import LightFieldShape, planes_to_exchange
-    from lfcl.methods import demosaic_lightfield
-    from lfcl.raw import read_mosaic
 
     out, summary, text = processed("aligned", "malvar", "--outputs", "lightfield", "--no-previews")
     geometry = summary["geometry"]
@@ -172,8 +172,8 @@ def test_batch_writes_the_same_bytes_as_process(captures, processed, tmp_path):
 
 @pytest.mark.parametrize("grid", ["rotated", "aligned"])
 def test_auto_names_and_runs_its_choice(grid, processed):
-    from lfcl.auto import AUTO_FALLBACK, choose
-    from lfcl.grid_demosaic import GRID_METHODS
+    from lfcl.demosaic.auto import AUTO_FALLBACK, choose
+    from lfcl.demosaic.resampled import GRID_METHODS
 
     out, summary, text = processed(grid, "auto", "--outputs", "lightfield", "--no-previews")
     auto = summary["parameters"]["auto"]
@@ -202,15 +202,15 @@ def _rule(candidate, worst, median=None):
 
 
 def _rules(both, **views):
-    """A rule file's contents (lfcl.auto.load_rules) holding ``both`` for every view but those given."""
+    """A rule file's contents (lfcl.demosaic.auto.load_rules) holding ``both`` for every view but those given."""
     return {"rules": {"both": both, "center": views.get("center", both), "mean": views.get("mean", both)}}
 
 
 def test_auto_lists_what_it_skipped_for_a_safer_method(captures, monkeypatch, tmp_path):
-    import lfcl.auto
+    import lfcl.demosaic.auto
 
     # admm-uv gains more in the middle but loses 0.5 dB to Malvar somewhere: Malvar is the pick
-    monkeypatch.setattr(lfcl.auto, "load_rules", lambda: _rules(_rule("malvar", {"malvar": 0.0, "admm-uv@1": -0.5},
+    monkeypatch.setattr(lfcl.demosaic.auto, "load_rules", lambda: _rules(_rule("malvar", {"malvar": 0.0, "admm-uv@1": -0.5},
                                                                       {"malvar": 0.0, "admm-uv@1": 1.5})))
     out = tmp_path / "out"
     result = invoke("process", captures / "rotated" / "raw.dng", "--calibration", captures / "rotated" / "cal.json",
@@ -231,9 +231,9 @@ def test_auto_lists_what_it_skipped_for_a_safer_method(captures, monkeypatch, tm
 ])
 def test_auto_on_a_resampled_grid_replaces_a_method_it_cannot_run(captures, monkeypatch, tmp_path, candidate,
                                                                   replaced):
-    import lfcl.auto
+    import lfcl.demosaic.auto
 
-    monkeypatch.setattr(lfcl.auto, "load_rules", lambda: _rules(_rule(candidate, {candidate: 0.0, "admm-uv@1": -0.2})))
+    monkeypatch.setattr(lfcl.demosaic.auto, "load_rules", lambda: _rules(_rule(candidate, {candidate: 0.0, "admm-uv@1": -0.2})))
     out = tmp_path / "out"
     result = invoke("process", captures / "hex" / "raw.dng", "--calibration", captures / "hex" / "cal.json",
                     "--method", "auto", "-o", out, "--outputs", "lightfield", "--no-previews", "--json")
@@ -264,8 +264,8 @@ def test_tolerance_db_sets_the_stop(grid, processed):
 
 
 def test_a_method_the_grid_does_not_take_is_one_line(captures, tmp_path):
-    from lfcl.grid_demosaic import GRID_METHOD_NAMES
-    from lfcl.method_names import METHODS
+    from lfcl.demosaic.names import METHODS
+    from lfcl.demosaic.resampled import GRID_METHOD_NAMES
 
     others = [m for m in METHODS if m not in GRID_METHOD_NAMES]
     assert others, "every method runs on resampled grids: test another refusal"
@@ -284,7 +284,7 @@ def test_a_method_the_grid_does_not_take_is_one_line(captures, tmp_path):
 
 
 def test_stage_contracts_of_the_resampled_kind(captures):
-    from lfcl.stages import Decode, Demosaic, Grid
+    from lfcl.pipeline.stages import Decode, Demosaic, Grid
 
     gridded = Grid(calibration=captures / "rotated" / "cal.json")(Decode()(captures / "rotated" / "raw.dng"))
     assert gridded.metadata["geometry"]["grid"] == "resampled" and gridded.lens_response is None
@@ -309,12 +309,12 @@ def test_a_linear4d_start_on_a_resampled_grid_is_one_line_before_any_work(captur
                                                    ("center,lightfield", "both", "admm-st")])
 def test_auto_takes_the_rule_judged_on_the_outputs_asked_for(captures, monkeypatch, tmp_path, grid, outputs, view,
                                                              method):
-    import lfcl.auto
+    import lfcl.demosaic.auto
 
     rules = _rules(_rule("admm-st@1", {"malvar": 0.0, "admm-uv@1": -0.3, "admm-st@1": 0.2}),
                    center=_rule("malvar", {"malvar": 0.0, "admm-uv@1": -0.3}),
                    mean=_rule("admm-uv@1", {"malvar": 0.0, "admm-uv@1": 0.4}))
-    monkeypatch.setattr(lfcl.auto, "load_rules", lambda: rules)
+    monkeypatch.setattr(lfcl.demosaic.auto, "load_rules", lambda: rules)
     out = tmp_path / "out"
     result = invoke("process", captures / grid / "raw.dng", "--calibration", captures / grid / "cal.json",
                     "--method", "auto", "-o", out,
@@ -323,5 +323,5 @@ def test_auto_takes_the_rule_judged_on_the_outputs_asked_for(captures, monkeypat
     summary = json.loads(result.output)
     auto = summary["parameters"]["auto"]
     assert (auto["view"], auto["method"]) == (view, method)
-    assert lfcl.auto.VIEW_WORDS[view] in auto["reason"]
+    assert lfcl.demosaic.auto.VIEW_WORDS[view] in auto["reason"]
     assert summary["options"]["auto_view"] == view

@@ -1,4 +1,4 @@
-"""lfcl.raw.read_mosaic on real files (../shared) and on small files written here.
+"""lfcl.io.raw.read_mosaic on real files (../shared) and on small files written here.
 
 The expected shapes, patterns and levels of the real raws are copied from
 ../shared/realdata/RAWPY_REPORT.txt (an independent rawpy 0.28 / LibRaw 0.22.2
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lfcl.raw import Mosaic, read_mosaic
+from lfcl.io.raw import Mosaic, read_mosaic
 
 SHARED = Path(os.environ.get("LFCL_SHARED", Path(__file__).resolve().parents[2] / "shared"))
 REALDATA = SHARED / "realdata"
@@ -225,7 +225,7 @@ def test_png_mosaic_needs_pattern():
 
 
 def test_lighthouse_exr_mosaic():
-    from lfcl.imageio import read_image
+    from lfcl.io.images import read_image
 
     path = shared_file("Lighthouse_CFA_GRBG.exr", LIGHTHOUSE)
     mosaic = read_mosaic(path, "GRBG")
@@ -247,7 +247,7 @@ def test_rgb_image_is_not_a_mosaic():
 
 
 def _write(path, image):
-    from lfcl.imageio import write_image
+    from lfcl.io.images import write_image
 
     write_image(path, image)
     return path

@@ -1,4 +1,4 @@
-"""Shift-and-add refocusing (lfcl.refocus) against a per-sample numpy reference and a known plane."""
+"""Shift-and-add refocusing (lfcl.outputs.refocus) against a per-sample numpy reference and a known plane."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lfcl.refocus import focal_stack, parse_slopes, refocus, slope_label
+from lfcl.outputs.refocus import focal_stack, parse_slopes, refocus, slope_label
 
 
 def reference_refocus(lf: np.ndarray, slope: float) -> np.ndarray:

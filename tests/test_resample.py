@@ -1,4 +1,4 @@
-"""The sampling model of any lens grid (lfcl/resampling.py) and the sparse device maps (lfcl/ops/resample.py)."""
+"""The sampling model of any lens grid (lfcl/grid/resampling.py) and the sparse device maps (lfcl/ops/resample.py)."""
 
 from __future__ import annotations
 
@@ -7,10 +7,10 @@ import pytest
 import scipy.sparse
 from conftest import relative_dot_error
 
+from lfcl.grid.resampling import sampling_model
 from lfcl.layout import channel_map
 from lfcl.ops.cfa import cfa_sample_np
 from lfcl.ops.resample import SparseOperator, multiply, sparse_adjoint_np, sparse_apply_np
-from lfcl.resampling import sampling_model
 from lfcl.sim.geometry import GridGeometry
 
 GRIDS = {
@@ -179,7 +179,7 @@ def test_sampling_model_bad_input():
 
 
 def test_calibration_and_geometry_agree():
-    from lfcl.calib import calibration_from_pitch
+    from lfcl.grid import calibration_from_pitch
 
     cal = calibration_from_pitch(9.4, (97, 101), "square", 0.7, (0.3, -0.2), pattern="GRBG")
     a = sampling_model(cal)

@@ -1,5 +1,5 @@
 """ADMM with the resampling inside A (lfcl/solvers/resampled.py) against its float64 reference, and the
-grid demosaic entry point (lfcl/grid_demosaic.py)."""
+grid demosaic entry point (lfcl/demosaic/resampled.py)."""
 
 from __future__ import annotations
 
@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 import scipy.sparse
 
-from lfcl.grid_demosaic import demosaic_resampled
-from lfcl.grid_noise import estimate_grid_noise
+from lfcl.demosaic.resampled import demosaic_resampled
+from lfcl.grid.resampling import sampling_model
 from lfcl.layout import planes_to_exchange
+from lfcl.noise.resampled import estimate_grid_noise
 from lfcl.ops.gradient import gradient_gram_np
 from lfcl.ops.malvar import malvar_np
-from lfcl.resampling import sampling_model
 from lfcl.sim.geometry import GridGeometry
 from lfcl.solvers.params import AdmmParams
 from lfcl.solvers.reference import admm_resampled_reference
@@ -121,9 +121,9 @@ def test_malvar_is_2d_malvar_then_resampling(rng):
 
 
 def test_admm_uv_entry_point_follows_the_method_defaults(rng):
-    from lfcl.grid_demosaic import GRID_TUNING
-    from lfcl.methods import ADMM_DEFAULTS
-    from lfcl.noise import NoiseEstimate
+    from lfcl.demosaic.methods import ADMM_DEFAULTS
+    from lfcl.demosaic.resampled import GRID_TUNING
+    from lfcl.noise.model import NoiseEstimate
 
     _, raw, _, _, _ = smooth_problem(rng, "hex")
     noise = NoiseEstimate(gain=0.0, floor=1e-4, sigma=123.0, source="test")  # sigma_at(level) = 0.01

@@ -1,28 +1,28 @@
-"""The safety net (lfcl/safety_net.py) on the default path: never worse than Malvar, on the fine-texture family too."""
+"""The safety net (lfcl/demosaic/safety_net.py) on the default path: never worse than Malvar, on the fine-texture family too."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from lfcl.method_names import DEFAULT_METHOD
-from lfcl.methods import demosaic_lightfield
-from lfcl.noise import NoiseEstimate
+from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.demosaic.names import DEFAULT_METHOD
+from lfcl.demosaic.safety_net import NET_K
+from lfcl.noise.model import NoiseEstimate
 from lfcl.ops.lensguard import guard_lens_means_np
 from lfcl.ops.malvar import malvar_np
-from lfcl.safety_net import NET_K
 
 
 @pytest.fixture(scope="module")
 def finetexture():
     """Fine texture off the focal plane (issue 18's failure), in the dark and in good light."""
-    from lfcl.evaluate import simulated_capture
+    from lfcl.evaluation.evaluate import simulated_capture
 
     return {lux: simulated_capture(24, lux, 3, "finetexture") for lux in (0.5, 12)}
 
 
 def _gains(capture, method, **options):
-    from lfcl.evaluate import run_method
+    from lfcl.evaluation.evaluate import run_method
 
     malvar, result = run_method(capture, "malvar"), run_method(capture, method, **options)
     return result["psnr_center"] - malvar["psnr_center"], result["psnr_mean"] - malvar["psnr_mean"], result

@@ -209,7 +209,7 @@ def test_scenes_render_and_are_deterministic():
 
 
 def test_texture_image_on_planes(tmp_path):
-    from lfcl.imageio import write_image
+    from lfcl.io.images import write_image
 
     rng = np.random.default_rng(0)
     image = rng.random((40, 50, 3)).astype(np.float32)
@@ -243,10 +243,10 @@ def test_a_camera_raw_textures_a_plane_developed_linear(tmp_path):
 
 
 def test_a_camera_raw_texture_declaring_too_many_pixels_is_refused(tmp_path, monkeypatch):
-    import lfcl.raw
+    import lfcl.io.raw
 
     dng = write_capture(simulate("charts", lenses=(6, 7), lux=6.0, seed=3), tmp_path / "cap") / "raw.dng"
-    monkeypatch.setattr(lfcl.raw, "MAX_PIXELS", 54 * 63 - 1)
+    monkeypatch.setattr(lfcl.io.raw, "MAX_PIXELS", 54 * 63 - 1)
     with pytest.raises(ValueError, match="declares 3402 pixels, more than the limit"):
         read_linear(dng)
 
@@ -266,7 +266,7 @@ def test_a_tiff_based_raw_is_developed_not_read_as_its_thumbnail():
 # --- light-field loading ---------------------------------------------------
 
 def make_hci(folder: Path, side=3, h=5, w=4):
-    from lfcl.imageio import write_image
+    from lfcl.io.images import write_image
 
     folder.mkdir()
     views = []
@@ -390,7 +390,7 @@ def cli():
     except ImportError:  # another command module is broken right now: test ours alone
         import click
 
-        from lfcl.commands.simulate import command
+        from lfcl.cli.commands.simulate import command
 
         group = click.Group("lfcl", commands={"simulate": command})
     return group
@@ -411,7 +411,7 @@ def test_cli_end_to_end(tmp_path, cli):
     assert meta["noise"]["sigma_at_mean"] == pytest.approx(0.0046, rel=0.02)
     truth = np.load(out / "truth.npy")
     assert truth.shape == (16, 16, 9, 9, 3) and truth.dtype == np.float32
-    from lfcl.imageio import read_image
+    from lfcl.io.images import read_image
 
     views = read_image(out / "truth_views.exr")
     np.testing.assert_array_equal(views, tiled_views(truth))
@@ -470,7 +470,7 @@ def _linear_in_x(a, b):
 def test_grid_truth_follows_the_scene_frame_conventions(grid):
     # a plane of disparity d whose texture is a + b x: sample (s, t, u, v) sees
     # a + b (x_c(s, t) + d (v - v0)), x_c = t + 1/2 (+ 1/2 on odd hex rows), whatever the box filter
-    from lfcl.resampling import sampling_model
+    from lfcl.grid.resampling import sampling_model
     from lfcl.sim.capture import render_grid
     from lfcl.sim.geometry import GridGeometry
 
@@ -488,7 +488,7 @@ def test_grid_truth_follows_the_scene_frame_conventions(grid):
 def test_grid_pixels_see_their_true_continuous_position():
     # no inverse crime: each pixel's value comes from its own position under its lens (brute-force
     # nearest lens centre, offset along the lens row in view steps), not from the regular samples
-    from lfcl.resampling import sampling_model
+    from lfcl.grid.resampling import sampling_model
     from lfcl.sim.capture import render_grid
     from lfcl.sim.geometry import GridGeometry
 

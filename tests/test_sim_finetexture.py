@@ -151,7 +151,7 @@ def test_cli_writes_raw_truth_and_disparity(tmp_path):
     except ImportError:  # another command module is broken right now: test ours alone
         import click
 
-        from lfcl.commands.simulate import command
+        from lfcl.cli.commands.simulate import command
 
         cli = click.Group("lfcl", commands={"simulate": command})
     out = tmp_path / "cap"

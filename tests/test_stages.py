@@ -1,4 +1,4 @@
-"""lfcl.stages / lfcl.recipes and `lfcl process --pipeline` (docs/stages.md)."""
+"""lfcl.pipeline.stages / lfcl.pipeline.recipes and `lfcl process --pipeline` (docs/stages.md)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import pytest
 from click.testing import CliRunner
 
 from lfcl.cli import cli
-from lfcl.recipes import DEFAULTS, PACKAGED, load_recipe, pipeline_from_recipe
-from lfcl.stages import Decode, Demosaic, Demosaiced, Grid, Gridded, Outputs, Pipeline
+from lfcl.pipeline.recipes import DEFAULTS, PACKAGED, load_recipe, pipeline_from_recipe
+from lfcl.pipeline.stages import Decode, Demosaic, Demosaiced, Grid, Gridded, Outputs, Pipeline
 
 
 @pytest.fixture(scope="module")

@@ -11,8 +11,8 @@ import pytest
 from click.testing import CliRunner
 
 from lfcl.cli import cli
-from lfcl.methods import demosaic_lightfield
-from lfcl.noise import NoiseEstimate
+from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.noise.model import NoiseEstimate
 from lfcl.ops.linear4d import linear4d
 from lfcl.ops.malvar import malvar_np
 from lfcl.solvers.params import AdmmParams
@@ -66,7 +66,7 @@ def test_lens_malvar_start_is_admm_from_the_lens_bounded_malvar_planes(textured_
 
 
 def test_guarded_lenses_are_the_frames_outliers_and_their_neighbours():
-    from lfcl.guarded_start import malvar_lenses
+    from lfcl.demosaic.guarded_start import malvar_lenses
 
     d = np.full((6, 7), 2.0)
     d[3, 5] = 7.0  # above 3 x the median 2
@@ -80,7 +80,7 @@ def test_guarded_lenses_are_the_frames_outliers_and_their_neighbours():
 
 
 def test_guarded_start_is_admm_from_linear4d_with_malvar_in_the_outlier_lenses(runtime, textured_mosaic):
-    from lfcl.guarded_start import malvar_lenses
+    from lfcl.demosaic.guarded_start import malvar_lenses
     from lfcl.ops.lensguard import lens_disagreement_np
 
     b = textured_mosaic.copy()
@@ -137,7 +137,7 @@ def test_process_start_option_reaches_the_solver_and_the_summary(tmp_path):
 
 
 def test_evaluate_takes_a_method_with_its_start(tmp_path):
-    from lfcl.evaluate import check_methods
+    from lfcl.evaluation.evaluate import check_methods
 
     assert check_methods(["admm-uv-xc:linear4d", "malvar"]) == ["admm-uv-xc:linear4d", "malvar"]
     with pytest.raises(ValueError, match="goes with an ADMM method only"):

@@ -22,8 +22,8 @@ import pytest
 from click.testing import CliRunner
 
 from lfcl.bench import stress
-from lfcl.methods import METHODS, demosaic_lightfield
-from lfcl.noise import NoiseEstimate
+from lfcl.demosaic.methods import METHODS, demosaic_lightfield
+from lfcl.noise.model import NoiseEstimate
 
 ADMM_METHODS = stress.ADMM_METHODS
 LENSES = (4, 4)  # the simulated scenes: 4x4 lenses of 9x9 pixels (36x36)

@@ -18,7 +18,7 @@ float32 data and timed: a warm-up call, then ``repeats`` calls each bracketed by
 
 Element-wise kernels and reductions run on ``P`` floats (one light field), the
 gradient kernels on ``[k, 3, H, W]`` for ``k`` = 2 (uv) or 4 (uvst) dims. The ADMM
-kernels of ``kernels/admm.cl`` are launched as ``AdmmSolver`` launches them;
+kernels of ``lfcl/kernels/admm.cl`` are launched as ``AdmmSolver`` launches them;
 ``build_rhs`` and ``lens_solve`` are included when the installed admm.cl has them.
 """
 
@@ -181,7 +181,7 @@ def lens_guard_cases(runtime, sensor, pitch) -> list[Case]:
 
 
 def lens_copy_cases(runtime, sensor, pitch) -> list[Case]:
-    """The flat lenses' two kernels (lfcl/methods.py): putting solved lenses back (a checkerboard of
+    """The flat lenses' two kernels (lfcl/demosaic/methods.py): putting solved lenses back (a checkerboard of
     half the lenses, each to its own place) and setting lenses to their colour means (the other half)."""
     from ..ops.lenscopy import LensCopy, copy_lenses_np, fill_lenses_np
 

@@ -2,7 +2,7 @@
 
 The "never worse than Malvar" check (issue 18): for each capture (a built-in scene at a seed that no
 default was fitted on, or a raw simulated from a real light field in ../shared) and each light level,
-run Malvar and each method through the public entry point (:func:`lfcl.evaluate.run_method`, the
+run Malvar and each method through the public entry point (:func:`lfcl.evaluation.evaluate.run_method`, the
 same call `lfcl process` makes) and print the PSNR of the centre view and of the mean image minus
 Malvar's, the worst cell first. Not a timed test: a benchmark to read (BENCHMARKS.md, docs/auto.md).
 
@@ -48,7 +48,7 @@ def captures(scenes, lightfields: dict[str, str], lenses: int, seed: int):
 def run(scenes, lightfields: dict[str, str], lux_levels, methods, *, lenses: int = 48, seed: int = HELD_OUT_SEED,
         device=None, progress=None) -> list[dict]:
     """One row per (capture, lux, method): PSNR (centre, mean) and its gain over Malvar, seconds."""
-    from ..evaluate import run_method, simulated_capture
+    from ..evaluation.evaluate import run_method, simulated_capture
 
     rows = []
     for label, source in captures(scenes, lightfields, lenses, seed):

@@ -7,9 +7,9 @@ the centre view, PSNR of the mean image), with two peers timed in the same run:
 * ``malvar``, ``linear4d``: lfcl's OpenCL Malvar-He-Cutler and learned 4D filter (one
   point each; no iterations);
 * ``admm-uv``, ``admm-st``, ``admm-uvst``, ... (any ADMM method, optionally ``NAME:START``,
-  e.g. ``admm-uv-xc:linear4d``): ``lfcl.methods.demosaic_lightfield`` with
+  e.g. ``admm-uv-xc:linear4d``): ``lfcl.demosaic.methods.demosaic_lightfield`` with
   ``iterations=k`` (no early stop), the noise level from the capture's DNG noise
-  profile as ``lfcl.evaluate.run_method`` does;
+  profile as ``lfcl.evaluation.evaluate.run_method`` does;
 * ``colour-demosaicing Malvar2004``: ``demosaicing_CFA_Bayer_Malvar2004`` on the
   whole mosaic (numpy/scipy, float64);
 * ``numpy reference admm-uv (CG)``: ``lfcl.solvers.reference.admm_reference`` (float64)
@@ -34,10 +34,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..evaluate import Capture, capture_in_memory, load_capture
+from ..demosaic.methods import ADMM_DEFAULTS, STARTS, admm_params, demosaic_lightfield
+from ..evaluation.evaluate import Capture, capture_in_memory, load_capture
+from ..evaluation.metrics import lightfield_scores
 from ..layout import LightFieldShape, planes_to_exchange
-from ..methods import ADMM_DEFAULTS, STARTS, admm_params, demosaic_lightfield
-from ..metrics import lightfield_scores
 from .timing import format_table, time_calls
 
 ADMM_METHODS = tuple(ADMM_DEFAULTS)
@@ -59,7 +59,7 @@ def make_capture(directory=None, lenses=(64, 64), lux: float = 12.0, scene: str 
 
 def _noise(capture: Capture):
     """The noise model run_method uses: the DNG noise profile, else an estimate from the raw."""
-    from ..noise import estimate_noise, from_noise_profile
+    from ..noise.model import estimate_noise, from_noise_profile
 
     if capture.noise_profile is not None:
         return from_noise_profile(capture.noise_profile, capture.mosaic)
@@ -220,8 +220,8 @@ def plot(report: dict, path) -> Path:
     """PSNR against seconds (log x): centre view and mean image side by side, one line per method."""
     import matplotlib.pyplot as plt
 
-    from .. import plots  # noqa: F401  (selects the Agg backend)
-    from ..imageio import atomic_path
+    from ..evaluation import plots  # noqa: F401  (selects the Agg backend)
+    from ..io.images import atomic_path
 
     methods = list(dict.fromkeys(p["method"] for p in report["points"]))
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharex=True)

@@ -1,7 +1,7 @@
 """The numerical stress suite (``lfcl bench stress``): every method on inputs chosen to break it.
 
 Repository issue "Robustness", item 1. Each *case* is a mosaic (with its pattern,
-pitch and keyword arguments for :func:`lfcl.methods.demosaic_lightfield`) that one
+pitch and keyword arguments for :func:`lfcl.demosaic.methods.demosaic_lightfield`) that one
 or more methods process twice; each (case, method) pair gives one row:
 
 * ``outcome``: ``ok``, or the exception's type (its message in ``message``);
@@ -42,7 +42,7 @@ GRBG, seed 0, unless said):
   needed: a result is expected);
 * ``raw``: 12-, 14- and 16-bit DNGs at full scale (a 100 lux exposure: about half
   the pixels at the white level) written with :func:`lfcl.sim.dng.write_dng`, read
-  back with :func:`lfcl.raw.read_mosaic`, the noise level from their NoiseProfile;
+  back with :func:`lfcl.io.raw.read_mosaic`, the noise level from their NoiseProfile;
   and a 16-bit DNG with every pixel at 65535 (at least 3x3 lenses: LibRaw refuses
   raws under 22 pixels a side);
 * ``noise``: extreme noise, the scene at 0.05 lux, all defaults;
@@ -67,7 +67,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..methods import ADMM_DEFAULTS, METHODS, admm_params, demosaic_lightfield
+from ..demosaic.methods import ADMM_DEFAULTS, METHODS, admm_params, demosaic_lightfield
 from .timing import format_table
 
 ADMM_METHODS = tuple(ADMM_DEFAULTS)
@@ -106,7 +106,7 @@ class Case:
 
 def _noise_of(sensor, mosaic):
     """The noise model ``lfcl process`` takes from the simulator's DNG NoiseProfile."""
-    from ..noise import from_noise_profile
+    from ..noise.model import from_noise_profile
 
     s, o = sensor.noise_profile()
     return from_noise_profile([s, o] * 3, mosaic)
@@ -119,7 +119,7 @@ def _shape_case(name, capture, pitch=(9, 9), mosaic=None, **kw) -> Case:
 
 def dng_capture(bits: int, lenses, directory: Path, lux: float = 100.0):
     """(mosaic read back from a ``bits``-bit DNG, the capture written into it, the DNG path)."""
-    from ..raw import read_mosaic
+    from ..io.raw import read_mosaic
     from ..sim import SensorModel, simulate
     from ..sim.dng import write_dng
 
@@ -132,7 +132,7 @@ def dng_capture(bits: int, lenses, directory: Path, lux: float = 100.0):
 
 def build_cases(lenses=(8, 8), groups=None) -> list[Case]:
     """The suite's cases for an S x T lens array (``groups``: only those groups)."""
-    from ..noise import from_noise_profile
+    from ..noise.model import from_noise_profile
     from ..sim import simulate
 
     S, T = (int(n) for n in lenses)
@@ -218,7 +218,7 @@ def build_cases(lenses=(8, 8), groups=None) -> list[Case]:
                 cases.append(Case(f"{bits}-bit DNG, full scale", "raw", mosaic.data, mosaic.pattern, (9, 9),
                                   kwargs={"noise": from_noise_profile(mosaic.noise_profile, mosaic.data)},
                                   note=f"white level {mosaic.white:g}, {100 * saturated:.0f} % of pixels at it"))
-            from ..raw import read_mosaic
+            from ..io.raw import read_mosaic
             from ..sim.dng import write_dng
 
             path = Path(tmp) / "white_16bit.dng"
@@ -369,7 +369,7 @@ def run_case(case: Case, method: str, device=None, repeat: bool = True) -> dict:
             else:
                 mosaic = case.mosaic
                 if case.kwargs.get("lens_response") is not None:  # Malvar runs on the flat-fielded mosaic
-                    from ..flatfield import flat_field
+                    from ..grid.vignetting import flat_field
 
                     mosaic, weights = flat_field(mosaic, case.kwargs["lens_response"])
                 with np.errstate(all="ignore"):

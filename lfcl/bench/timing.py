@@ -125,7 +125,7 @@ def add_capture_arguments(parser, methods: str) -> None:
 
 def captures(args):
     """(lenses, scene, lux, capture) for every capture :func:`add_capture_arguments` names, in memory."""
-    from ..evaluate import simulated_capture
+    from ..evaluation.evaluate import simulated_capture
 
     textures = args.texture.split(",") if args.texture else [None]
     if args.lightfield and textures != [None]:

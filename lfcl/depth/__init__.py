@@ -1,5 +1,5 @@
 """Disparity from the lenslet raw (docs/depth.md): a cost volume along the epipolar lines on the
-device (kernels/depth.cl, numpy twin :func:`lfcl.depth.cost.cost_volume_np`), aggregation, sub-step
+device (lfcl/kernels/depth.cl, numpy twin :func:`lfcl.depth.cost.cost_volume_np`), aggregation, sub-step
 refinement, a confidence and confidence-weighted smoothing.
 
     >>> from lfcl.depth import estimate_disparity  # doctest: +SKIP

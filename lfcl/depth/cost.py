@@ -28,7 +28,7 @@ The plane (``model="plane"``) removes the first-order texture inside the gather 
 otherwise biases the cost towards integer ``d`` (where the footprint shrinks to one lens);
 ``model="mean"`` fits the mean only.
 
-:func:`cost_volume_np` is the float64 reference; :class:`CostVolume` runs ``kernels/depth.cl``.
+:func:`cost_volume_np` is the float64 reference; :class:`CostVolume` runs ``lfcl/kernels/depth.cl``.
 Both return ``[2, ND, S, T]`` float32: excess, weight.
 """
 
@@ -154,7 +154,7 @@ def cost_volume_np(mosaic, pattern: str, pitch, disparities, *, origin=(0, 0), n
 
 
 class CostVolume:
-    """The cost volume on the device (``kernels/depth.cl``) for an ``[S*U, T*V]`` mosaic."""
+    """The cost volume on the device (``lfcl/kernels/depth.cl``) for an ``[S*U, T*V]`` mosaic."""
 
     def __init__(self, runtime, sensor_shape, pattern: str, pitch, disparities, *, origin=(0, 0),
                  model: str = "plane"):

@@ -50,7 +50,7 @@ DEFAULTS = {
     "exclusion": 0.25,  # the confidence compares the best cost with the lowest one this far away
     "confidence_z": 4.0,  # distinctiveness (noise units) at which the confidence reaches 1 - 1/e
     "occlusion": True,  # also try the four half apertures (top, bottom, left, right views) per lens
-    "backend": "device",  # "device" (kernels/depth.cl) or "numpy" (the float64 twin)
+    "backend": "device",  # "device" (lfcl/kernels/depth.cl) or "numpy" (the float64 twin)
 }
 
 
@@ -144,8 +144,8 @@ def _options(options: dict) -> dict:
 def _noise_model(mosaic, pattern, pitch, origin, noise) -> tuple[float, float, dict]:
     """(gain, floor, metadata) of the Poisson-Gaussian model ``var = gain * x + floor``.
 
-    ``noise`` given (lfcl.noise.NoiseEstimate): used as is. Else estimated from the raw
-    (lfcl.noise.estimate_noise); a raw too small for that (fewer than 2x2 lenses of 4x4)
+    ``noise`` given (lfcl.noise.model.NoiseEstimate): used as is. Else estimated from the raw
+    (lfcl.noise.model.estimate_noise); a raw too small for that (fewer than 2x2 lenses of 4x4)
     gets a constant variance from the median absolute difference of same-colour neighbours
     two columns apart (said in the metadata as ``source: "mad"``).
     """
@@ -154,7 +154,7 @@ def _noise_model(mosaic, pattern, pitch, origin, noise) -> tuple[float, float, d
         if not (np.isfinite(gain) and np.isfinite(floor)) or gain < 0 or floor < 0:
             raise ValueError(f"noise model must be finite and >= 0, got gain {gain!r}, floor {floor!r}")
         return gain, floor, {"gain": gain, "floor": floor, "source": str(noise.source)}
-    from ..noise import estimate_noise
+    from ..noise.model import estimate_noise
 
     try:
         est = estimate_noise(mosaic, pattern, pitch, origin)
@@ -337,7 +337,7 @@ def estimate_disparity(mosaic, pattern, pitch, *, origin=(0, 0), noise=None, dev
 
     ``mosaic`` [S*U, T*V] (whole lenses of an aligned grid whose first lens starts at pixel 0, 0 of
     the array), ``pattern`` a Bayer name, ``pitch`` an int or (U, V), ``origin`` the sensor
-    (row, col) of the array's first pixel (CFA phase), ``noise`` a :class:`lfcl.noise.NoiseEstimate`
+    (row, col) of the array's first pixel (CFA phase), ``noise`` a :class:`lfcl.noise.model.NoiseEstimate`
     (None: estimated from the raw), ``device`` as :func:`lfcl.device.get_runtime`. ``options``:
     see :data:`DEFAULTS`.
     """

@@ -4,7 +4,7 @@
 view step, HCI's sign (lfcl/depth/estimate.py). ``depth_confidence.exr``: one channel in [0, 1]
 (0 = unknown). ``depth.png``: an 8-bit preview, the disparity through a matplotlib colour map
 over the range in its metadata (``preview_range``). Every file records units, sign, search
-range and the estimator's options as ``lfcl:`` attributes (lfcl.imageio.write_image); each is
+range and the estimator's options as ``lfcl:`` attributes (lfcl.io.images.write_image); each is
 written atomically (temporary name, then rename).
 """
 
@@ -52,14 +52,14 @@ def depth_files(depth, metadata: dict | None = None) -> list[tuple[str, np.ndarr
 
 def write_depth(out_dir, depth, metadata: dict | None = None) -> list[Path]:
     """Write the three files into ``out_dir`` (each atomically); returns their paths."""
-    from ..imageio import write_image
+    from ..io.images import write_image
 
     out_dir = Path(out_dir)
     return [write_image(out_dir / name, image, meta) for name, image, meta in depth_files(depth, metadata)]
 
 
 def depth_from_mosaic(mosaic, geometry: dict, device=None, **options):
-    """The disparity map of a decoded raw (:class:`lfcl.raw.Mosaic`) on the pipeline's lens grid.
+    """The disparity map of a decoded raw (:class:`lfcl.io.raw.Mosaic`) on the pipeline's lens grid.
 
     ``geometry`` is the Grid stage's ``metadata["geometry"]``: an ``aligned-square`` grid (``pitch``,
     ``lenses``, ``first_lens_pixel``); other grids are refused (``ValueError``). The noise model is
@@ -68,7 +68,7 @@ def depth_from_mosaic(mosaic, geometry: dict, device=None, **options):
     if geometry.get("grid") != "aligned-square":
         raise ValueError(f"the depth output needs an aligned square lens grid; this one is {geometry.get('grid')!r} "
                          "(rotated, non-integer-pitch and hexagonal grids are not supported yet)")
-    from ..noise import from_noise_profile
+    from ..noise.model import from_noise_profile
     from .estimate import estimate_disparity
 
     U, V = (int(p) for p in geometry["pitch"])

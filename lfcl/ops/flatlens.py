@@ -7,9 +7,9 @@ colour c, over its lit pixels P_c (lens weight w > 0)::
     mu_c  = sum_{P_c} w x / sum_{P_c} w                     weighted mean (w = response^2)
     chi2  = sum_c sum_{P_c} (x - mu_c)^2 / var(mu_c)         var = (gain sqrt(w) mu_c+ + floor) / w
 
-with the raw's Poisson-Gaussian noise model (gain, floor; lfcl/noise.py) carried through
+with the raw's Poisson-Gaussian noise model (gain, floor; lfcl/noise/model.py) carried through
 the flat field (x = raw / response, so var(x) = var(raw) / response^2). For a flat lens
-chi2 follows chi-square with sum_c (|P_c| - 1) degrees of freedom; lfcl/flat_lenses.py
+chi2 follows chi-square with sum_c (|P_c| - 1) degrees of freedom; lfcl/demosaic/flat_lenses.py
 turns it into a p-value and decides.
 
 ``lens_flatness_np`` is the float64 reference; ``LensFlatness`` runs it on the device.

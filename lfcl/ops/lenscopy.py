@@ -5,8 +5,8 @@ colour planes, the gradient blocks ``[k, C, H, W]`` or a mosaic ``[H, W]``. A pa
 ``(i, j)`` copies lens ``i = s * T + t`` of the source to lens ``j`` of the destination,
 in every plane; a pair ``(-1, j)`` sets lens ``j`` to zero; lenses no pair names keep their
 values. lfcl/solvers/freeze.py uses it
-to move the lenses still being solved into a smaller solver and back, lfcl/methods.py to pack the
-lenses that are not flat into a smaller solver and to put them back (lfcl/flat_lenses.py), where
+to move the lenses still being solved into a smaller solver and back, lfcl/demosaic/methods.py to pack the
+lenses that are not flat into a smaller solver and to put them back (lfcl/demosaic/flat_lenses.py), where
 ``fill_lenses`` gives the flat ones their colour means.
 
 Example::
@@ -77,7 +77,7 @@ def fill_lenses_np(dst: np.ndarray, lenses, values, pitch) -> np.ndarray:
 
 
 class LensCopy:
-    """copy_lenses_np and fill_lenses_np on the device (kernels/lenscopy.cl), for lenses of one pitch."""
+    """copy_lenses_np and fill_lenses_np on the device (lfcl/kernels/lenscopy.cl), for lenses of one pitch."""
 
     def __init__(self, runtime, pitch):
         self.runtime = runtime

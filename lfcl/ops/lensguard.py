@@ -1,13 +1,13 @@
 """Per-lens disagreement of two ADMM starts, and taking chosen lenses from one: the device half of
-the ``guarded`` start (lfcl/guarded_start.py has the rule that decides).
+the ``guarded`` start (lfcl/demosaic/guarded_start.py has the rule that decides).
 
 For lens (s, t), two starts a, b [3, H, W] and the raw mosaic x::
 
     D[s, t] = sqrt( mean over its 3 U V samples of (a - b)^2 / var(level) ),
-    level   = max(mean of x over the lens, 0),   var = gain level + floor   (lfcl/noise.py's model)
+    level   = max(mean of x over the lens, 0),   var = gain level + floor   (lfcl/noise/model.py's model)
 
 ``lens_disagreement_np`` and ``take_lenses_np`` are the float64 references; ``LensGuard`` runs
-both on the device (kernels/lensguard.cl), so only the [S, T] array of D comes back to the host.
+both on the device (lfcl/kernels/lensguard.cl), so only the [S, T] array of D comes back to the host.
 
 Example::
 
@@ -52,7 +52,7 @@ def take_lenses_np(x: np.ndarray, source: np.ndarray, chosen: np.ndarray, pitch)
 
 def guard_lens_means_np(x: np.ndarray, malvar: np.ndarray, mosaic: np.ndarray, pitch, *, gain: float,
                         floor: float, k: float) -> tuple[np.ndarray, np.ndarray]:
-    """The safety net's lens-mean guard (kernels/lensguard.cl ``guard_lens_means``), float64.
+    """The safety net's lens-mean guard (lfcl/kernels/lensguard.cl ``guard_lens_means``), float64.
 
     Returns (x with each lens's colour means soft-thresholded towards Malvar's at ``k`` sd, sd the
     noise of a mean of a quarter of the lens's samples at its level; the number of colours [S, T]

@@ -27,7 +27,7 @@ Borders (:func:`tap_samples`):
   ``2 ds`` lenses moves an even number of rows (columns), so the sample keeps its
   CFA colour. If that lens is outside too (one lens row or column), the tap reads 0.
 
-The numpy twin :func:`linear4d_np` and the kernel ``kernels/linear4d.cl`` follow
+The numpy twin :func:`linear4d_np` and the kernel ``lfcl/kernels/linear4d.cl`` follow
 the same rules. Coefficients are selected by the noise level (:func:`select_coefficients`).
 """
 
@@ -303,7 +303,7 @@ def save_model(path, model: Linear4dModel) -> None:
     """Write ``model`` as an .npz (metadata as JSON), atomically."""
     import json
 
-    from ..imageio import atomic_path
+    from ..io.images import atomic_path
 
     with atomic_path(path, suffix=".npz") as tmp:
         np.savez(tmp, pitch=np.asarray(model.pitch, np.int64), taps=model.taps,
@@ -369,7 +369,7 @@ def linear4d(runtime_or_device, mosaic, pattern: str, pitch, origin=(0, 0), nois
     """Demosaic a normalised lenslet mosaic ``[H, W]`` into ``[3, H, W]`` float32 planes.
 
     ``runtime_or_device``: a :class:`lfcl.device.Runtime` or a device spec for
-    :func:`lfcl.device.get_runtime`. ``noise``: a :class:`lfcl.noise.NoiseEstimate`
+    :func:`lfcl.device.get_runtime`. ``noise``: a :class:`lfcl.noise.model.NoiseEstimate`
     (default: estimated from the mosaic) whose ``sigma`` relative to the mosaic's
     mean level picks the coefficients. ``model`` defaults to the shipped coefficients.
     """
@@ -384,7 +384,7 @@ def linear4d(runtime_or_device, mosaic, pattern: str, pitch, origin=(0, 0), nois
 def linear4d_operator(runtime, mosaic, pattern: str, pitch, origin=(0, 0), noise=None, model=None) -> Linear4d:
     """The :class:`Linear4d` for ``mosaic`` (host array): the coefficient set its noise level picks,
     after the checks of :func:`linear4d`; its ``forward`` takes and gives device arrays."""
-    from ..noise import estimate_noise
+    from ..noise.model import estimate_noise
 
     model = model if model is not None else load_model()
     pitch = tuple(int(p) for p in pitch)

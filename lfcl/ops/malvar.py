@@ -17,11 +17,11 @@ colour-demosaicing's scipy ``mode="reflect"`` repeats the edge sample and breaks
 the CFA parity at the border. Tiny images: along an axis of 2 pixels the fold
 repeats (-2 -> 0, 3 -> 1); along an axis of 1 pixel every index maps to 0 (the
 filters are then applied to that constant extension as they are). The numpy twin
-:func:`malvar_np` and the kernel ``kernels/malvar.cl`` follow the same rule.
+:func:`malvar_np` and the kernel ``lfcl/kernels/malvar.cl`` follow the same rule.
 
 ``lens=(U, V)`` bounds the filters to each lens of an aligned lens grid: the same mirror
 about the lens's edge samples, so that no filter reads a neighbouring micro-image (the
-lens-bounded Malvar, an ADMM start: lfcl.methods ``start="lens-malvar"``, docs/auto.md).
+lens-bounded Malvar, an ADMM start: lfcl.demosaic.methods ``start="lens-malvar"``, docs/auto.md).
 
 Layouts: the mosaic is ``[H, W]``; the device class returns planes ``[3, H, W]``
 (docs/layout.md); the public :func:`malvar` returns ``(H, W, 3)``.

@@ -1,7 +1,7 @@
 """Accurate reductions: dot product, squared 2-norm and sum of float32 arrays.
 
 The device versions use the compensated Dot2 / Sum2 scheme of Ogita, Rump and
-Oishi (kernels/reduce.cl): a fixed number ``G`` of work-items each carry a
+Oishi (lfcl/kernels/reduce.cl): a fixed number ``G`` of work-items each carry a
 (sum, error) float pair per SIMD lane, and the host adds the ``G`` pairs in
 float64 with :func:`math.fsum`. The result is as accurate as a float64
 accumulation (relative error ~1e-7 or better even for 1e8 random-sign terms),

@@ -1,9 +1,9 @@
 """Sparse linear maps on the device: ``y = M x`` and ``x = M^T y`` for a CSR matrix ``M``.
 
-The resampling maps of lfcl/resampling.py (the forward operator ``A`` of any
+The resampling maps of lfcl/grid/resampling.py (the forward operator ``A`` of any
 lens grid, and the map from a demosaiced sensor image to the regular light
 field) are sparse with at most 4 entries a row. Both directions run as gathers
-(kernels/resample.cl): one work-item per output element sums its row, and the
+(lfcl/kernels/resample.cl): one work-item per output element sums its row, and the
 adjoint gathers with ``M^T``, transposed once on the host, so nothing is
 accumulated with atomics. ``planes`` stacked inputs share one matrix (a map
 applied to each colour plane). Values are float32 on the device; the numpy twins

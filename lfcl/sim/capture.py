@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..imageio import write_image, write_json, write_npy
+from ..io.images import write_image, write_json, write_npy
 from ..layout import channel_map, parse_pattern, tiled_views
 from .dng import write_dng
 from .geometry import GridGeometry, LensletGeometry
@@ -448,7 +448,7 @@ def write_white_capture(capture: WhiteCapture, directory) -> Path:
 class GridCapture(_SensorLevels):
     """A simulated capture through a square or hexagonal grid of any pitch, rotation and offset.
 
-    ``truth`` is on the solver's regular grid (``sampling``, lfcl/resampling.py).
+    ``truth`` is on the solver's regular grid (``sampling``, lfcl/grid/resampling.py).
     """
 
     raw: np.ndarray  # uint16 [H, W] CFA mosaic
@@ -458,7 +458,7 @@ class GridCapture(_SensorLevels):
     geometry: GridGeometry
     sensor: SensorModel
     pattern: str
-    sampling: object  # lfcl.resampling.SamplingModel of the true geometry
+    sampling: object  # lfcl.grid.resampling.SamplingModel of the true geometry
 
     def normalised_raw(self) -> np.ndarray:
         """``(raw - black) / (white - black)`` as float32."""
@@ -485,9 +485,9 @@ def render_grid(planes, sampling, supersample: int = 3):
     """The scene through a lens grid: ``(truth [S, T, U, V, 3], radiance [H*W, 3])``, relative units.
 
     ``truth``: the planes at the regular samples of ``sampling`` (an
-    :class:`lfcl.resampling.SamplingModel`); ``radiance``: every sensor pixel's
+    :class:`lfcl.grid.resampling.SamplingModel`); ``radiance``: every sensor pixel's
     colour at its own continuous light-field position (nearest lens, offset from
-    its centre in view steps, :meth:`~lfcl.resampling.SamplingModel.pixel_coordinates`),
+    its centre in view steps, :meth:`~lfcl.grid.resampling.SamplingModel.pixel_coordinates`),
     all three colours. Lens (s, t) sits at :func:`lfcl.sim.geometry.scene_position`
     and integrates over a box of its pitch (rows of a hex grid: sqrt(3)/2 of it).
     """
@@ -518,14 +518,14 @@ def simulate_grid(scene: str = "charts", grid: str = "square", pitch: float = 9.
 
     The sensor is ``sensor_shape`` or just large enough for ``lenses`` (S, T; default
     64x64), as :func:`simulate_white`. The regular light field is the one the
-    solvers estimate for the *true* grid (:func:`lfcl.resampling.sampling_model`,
+    solvers estimate for the *true* grid (:func:`lfcl.grid.resampling.sampling_model`,
     ``views`` default round(pitch)): the truth holds the scene at its samples. Each
     sensor pixel sees the scene at its own continuous light-field position (its
     nearest lens, its offset from that lens's centre in view steps; no bilinear
     model involved), times the micro-image response (the white image's disc and,
     with ``vignetting``, the cos^4 falloff), through the sensor's noise model.
     """
-    from ..resampling import sampling_model
+    from ..grid.resampling import sampling_model
     from .geometry import scene_frame
 
     lux = _check_lux(lux)

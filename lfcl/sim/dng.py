@@ -33,9 +33,9 @@ from __future__ import annotations
 import numpy as np
 import tifffile
 
+from ..io.linear_dng import XYZ_TO_SRGB  # XYZ (D65) -> linear sRGB: the simulated camera's primaries
+from ..io.linear_dng import rationals as _rationals  # the TIFF rationals, shared with the LinearRaw writer
 from ..layout import CHANNEL_INDEX, parse_pattern
-from ..linear_dng import XYZ_TO_SRGB  # XYZ (D65) -> linear sRGB: the simulated camera's primaries
-from ..linear_dng import rationals as _rationals  # the TIFF rationals, shared with the LinearRaw writer
 
 CAMERA_MODEL = "lfcl simulated lenslet camera"
 

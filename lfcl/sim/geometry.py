@@ -16,7 +16,7 @@ so ``factor = cos(theta)^4 = (1 + (r / (f_number * pitch))^2)^-2``. At f/2.8 and
 a 9-pixel pitch the centre pixel gets 1.0 and the corner pixels about 0.91.
 
 :class:`GridGeometry` is a square or hexagonal grid of any pitch, rotation and
-offset (lens centres as :class:`lfcl.calib.grid.LensGrid`): its white image
+offset (lens centres as :class:`lfcl.grid.lattice.LensGrid`): its white image
 (:meth:`GridGeometry.white_expected`, :func:`render_white`; docs/calibration.md)
 and, with :func:`lfcl.sim.capture.simulate_grid`, raws rendered at every pixel's
 true continuous light-field position (:func:`scene_position`; docs/geometry.md).
@@ -124,7 +124,7 @@ class GridGeometry:
 
     White images (:func:`white_expected`, :func:`render_white`) and raws
     (:func:`lfcl.sim.capture.simulate_grid`) are simulated for these grids. The
-    lens centres follow :class:`lfcl.calib.grid.LensGrid` (``centre(i, j)``;
+    lens centres follow :class:`lfcl.grid.lattice.LensGrid` (``centre(i, j)``;
     ``offset`` (0, 0), pitch 9, square, no rotation puts lens (0, 0) at pixel
     (4, 4) as in the aligned camera). Each lens forms a micro-image of the main
     lens aperture: a disc of diameter ``fill * pitch`` with a soft edge (Gaussian
@@ -173,7 +173,7 @@ class GridGeometry:
         return cls((max(1, round(S * row)), max(1, round(T * float(pitch)))), grid, pitch, **kwargs)
 
     def lens_grid(self):
-        from ..calib.grid import LensGrid
+        from ..grid.lattice import LensGrid
 
         return LensGrid.from_params(self.grid, self.pitch, self.rotation_deg, self.offset)
 
@@ -270,7 +270,7 @@ def scene_position(packing: str, s, t):
     puts lens (s, t) at ``(s + 1/2, t + 1/2)`` like the aligned camera; a
     hexagonal grid's lens rows are sqrt(3)/2 apart and its odd rows shifted by half
     a pitch: ``(s sqrt(3)/2 + 1/2, t + 1/2 + (s mod 2) / 2)`` (the regular block
-    starts at an even lens row, lfcl/resampling.py).
+    starts at an even lens row, lfcl/grid/resampling.py).
     """
     s, t = np.asarray(s), np.asarray(t)
     if packing == "hex":

@@ -107,10 +107,10 @@ def _finite_rgb(pixels: np.ndarray, path) -> np.ndarray:
 def _develop_raw(path: Path) -> np.ndarray | None:
     """A camera raw developed by LibRaw to linear sRGB in [0, 1] (camera white balance, no
     brightening, 16 bits); None if LibRaw does not read the file, ``ValueError`` if its header
-    declares more than lfcl.raw.MAX_PIXELS pixels."""
+    declares more than lfcl.io.raw.MAX_PIXELS pixels."""
     import rawpy
 
-    from ..raw import MAX_PIXELS
+    from ..io.raw import MAX_PIXELS
 
     try:
         with rawpy.imread(str(path)) as raw:

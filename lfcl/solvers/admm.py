@@ -428,7 +428,7 @@ class AdmmSolver:
         parameter sweeps); ``x`` is the current device array, not to be modified.
         ``lens_weights`` [U, V]: see :meth:`set_lens_weights`.
         ``samples``: the samples the rms change is taken over (default all of x; a packed
-        mosaic's zero padding lenses, lfcl/flat_lenses.py, are left out of it).
+        mosaic's zero padding lenses, lfcl/demosaic/flat_lenses.py, are left out of it).
         """
         self.set_lens_weights(lens_weights)
         check_device_array(b, (self.height, self.width), "b")

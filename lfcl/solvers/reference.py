@@ -160,7 +160,7 @@ def admm_resampled_reference(b, weights, matrix, shape, dims, params: AdmmParams
     """The float64 twin of lfcl/solvers/resampled.py: ``A`` a sparse matrix.
 
     ``matrix`` maps the regular planes ``[3, S*U, T*V]`` (``shape = (S, T, U, V)``)
-    flattened onto the measured pixels (lfcl/resampling.py ``forward_matrix``);
+    flattened onto the measured pixels (lfcl/grid/resampling.py ``forward_matrix``);
     ``b`` and ``weights`` are per measured pixel; ``x0`` the start planes.
     """
     import scipy.sparse

@@ -1,7 +1,7 @@
 """ADMM-TV on the regular light field of any lens grid, with the resampling inside the forward operator.
 
 The problem of lfcl/solvers/admm.py (paper, section 3.4), but ``A`` now maps the
-regular light field ``x`` (planes ``[3, S*U, T*V]``, lfcl/resampling.py) onto
+regular light field ``x`` (planes ``[3, S*U, T*V]``, lfcl/grid/resampling.py) onto
 the *measured sensor pixels* of a rotated, non-integer-pitch or hexagonal grid:
 ``A = CFA-pick(R x)`` with ``R`` bilinear within each lens, a sparse matrix::
 

@@ -1,0 +1,1 @@
+"""`lfcl batch`: many captures through the pipeline on Dask, resumable."""

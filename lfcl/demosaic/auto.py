@@ -1,0 +1,276 @@
+"""``--method auto``: choose the method and the lambda strength from the raw's noise level and content.
+
+The choice is a table over bands of sigma (rms noise per raw pixel, normalised units; from the DNG
+NoiseProfile or estimated from the raw, lfcl/noise/model.py), shipped as lfcl/data/auto_rule.json and
+fitted by research/fit_auto.py on training captures only (charts, deadleaves and finetexture at seeds
+1 and 2, charts planes carrying four training photographs), every candidate run as `lfcl process`
+runs it (the safety net on). In each band it holds the candidate (method, lambda strength) of the best
+*worst-case* PSNR gain over Malvar on those captures, and among those within ``TIE_DB`` of it the one
+of the largest median gain (:func:`fit_rule`): Malvar is a candidate, so a pick is never more than
+``TIE_DB`` below Malvar on its training captures ("never worse than Malvar", docs/auto.md). A sigma
+outside the trained range takes the nearest band, and the reason says so.
+
+The gains can be judged on both views (the lower of the two, the default) or on one of them: the
+file holds a rule for each (``VIEWS``), and a run that writes only the centre view, or only the mean
+image and refocused images, takes the rule fitted to that (:func:`view_for_outputs`). The raw's cross-lens ratio
+(lfcl/demosaic/lens_ratio.py) is recorded, and the reason says when it lies outside what the band's training
+captures spanned.
+
+Example::
+
+    >>> from lfcl.demosaic.auto import choose
+    >>> choice = choose(0.0046)
+    >>> choice.method in ("malvar", "admm-uv", "admm-uvst", "admm-uv-xc", "linear4d")
+    True
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import itertools
+import json
+import math
+import statistics
+from importlib import resources
+
+RULE_FILE = "auto_rule.json"
+#: What ``auto`` runs when the rule names a method that cannot run on the raw at hand (linear4d
+#: on a pitch without coefficients, a method a resampled grid lacks): the method that gained
+#: over malvar on every setting measured (docs/admm.md, docs/geometry.md), at strength 1.
+AUTO_FALLBACK = "admm-uv"
+#: What a rule's losses are judged on: the worse of the centre view and the mean image, or one of them.
+VIEWS = ("both", "center", "mean")
+VIEW_WORDS = {"both": "centre view or mean image, whichever is worse", "center": "centre view",
+              "mean": "mean image"}
+#: The rule's sigma bands: this many a decade (research/fit_auto.py); candidates within TIE_DB of the best
+#: worst case are ranked by their median gain.
+BANDS_PER_DECADE = 4
+TIE_DB = 0.1
+#: Outputs that the mean image speaks for: a refocused image is a shifted mean over the views.
+MEAN_LIKE_OUTPUTS = frozenset({"mean", "refocus"})
+
+
+def view_for_outputs(outputs) -> str:
+    """The rule (``VIEWS``) for a run writing ``outputs`` (lfcl.outputs.files.KINDS): ``center`` alone takes the
+    centre-view rule, ``mean`` and ``refocus`` alone the mean-image rule, anything else (the views, the
+    light field, a centre view and a mean image together) the rule judged on both."""
+    kinds = set(outputs)
+    if kinds == {"center"}:
+        return "center"
+    if kinds and kinds <= MEAN_LIKE_OUTPUTS:
+        return "mean"
+    return "both"
+
+
+@dataclasses.dataclass(frozen=True)
+class AutoChoice:
+    """What ``auto`` chose for one raw, and why (goes into the outputs' metadata)."""
+
+    method: str
+    strength: float
+    sigma: float
+    reason: str
+    start: str = "malvar"  # the ADMM methods' first estimate (lfcl.demosaic.methods.STARTS)
+    # the raw's cross-lens ratio (lfcl/demosaic/lens_ratio.py; None: not measured or not significant) and
+    # whether the band's training captures spanned it (None: unknown)
+    lens_ratio: float | None = None
+    seen_content: bool | None = None
+    view: str = "both"  # the rule's losses were judged on this view (VIEWS)
+
+    def as_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def check_view(view: str) -> str:
+    if view not in VIEWS:
+        raise ValueError(f"auto's view must be one of {', '.join(VIEWS)}, got {view!r}")
+    return view
+
+
+@functools.lru_cache(maxsize=1)
+def load_rules() -> dict:
+    """The shipped rule file (lfcl/data/auto_rule.json): ``rules[content][view]``, sigma bands (:func:`fit_rules`)."""
+    return json.loads(resources.files("lfcl.data").joinpath(RULE_FILE).read_text())
+
+
+def rule_bands(rules: dict, view: str = "both") -> tuple[dict, ...] | None:
+    """The sigma bands of a rule file's contents ``rules`` for ``view``, lowest first; None where it holds none."""
+    bands = rules.get("rules", {}).get(view)
+    return tuple(sorted(bands, key=lambda b: b["sigma_from"])) if bands else None
+
+
+def load_rule(view: str = "both") -> tuple[dict, ...]:
+    """The shipped sigma bands of the rule for ``view`` (``VIEWS``), lowest first."""
+    bands = rule_bands(load_rules(), check_view(view))
+    if not bands:
+        raise ValueError(f"lfcl/data/{RULE_FILE} holds no rule for view {view!r}: refit it with "
+                         "research/fit_auto.py")
+    return bands
+
+
+def row_gain(row: dict, candidate: str, view: str) -> float:
+    """A training row's PSNR gain of ``candidate`` over Malvar on ``view`` (``both``: the lower of the two)."""
+    if candidate == "malvar":
+        return 0.0
+    gains = row["gains"][candidate]
+    return min(gains["center"], gains["mean"]) if view == "both" else gains[view]
+
+
+def row_merit(row: dict, candidate: str, view: str) -> float:
+    """What ties of the worst case are broken by: the gain on ``view``, for ``both`` the mean of the two views'
+    gains (their lower one is often the mean image's, which the safety net holds at Malvar's)."""
+    if candidate == "malvar" or view != "both":
+        return row_gain(row, candidate, view)
+    gains = row["gains"][candidate]
+    return 0.5 * (gains["center"] + gains["mean"])
+
+
+def _band_edges(rows) -> list[float]:
+    """Contiguous sigma bands, a quarter decade wide, over the rows' noise levels: empty bands join the next."""
+    logs = sorted(math.log10(max(r["sigma"], 1e-12)) for r in rows)
+    lo, hi = math.floor(logs[0] * BANDS_PER_DECADE), math.floor(logs[-1] * BANDS_PER_DECADE) + 1
+    edges = [10 ** (k / BANDS_PER_DECADE) for k in range(lo, hi + 1)]
+    kept = [edges[0]] + [e for e in edges[1:-1] if any(e <= r["sigma"] < e * 10 ** (1 / BANDS_PER_DECADE)
+                                                        for r in rows)] + [edges[-1]]
+    return sorted(set(kept))
+
+
+def _band(rows: list[dict], lo: float, hi: float, view: str, tie_db: float, pick: str | None = None) -> dict:
+    """One band of :func:`fit_rule` over ``rows`` (those of ``[lo, hi)``): each candidate's worst and
+    median gain, and the pick (``pick``, or the best worst case; within ``tie_db`` of it, the best median)."""
+    candidates = ["malvar", *sorted({c for r in rows for c in r["gains"]})]
+    worst, median, seconds = {}, {}, {}
+    for c in candidates:
+        if all(c == "malvar" or c in r["gains"] for r in rows):
+            worst[c] = min(row_gain(r, c, view) for r in rows)
+            median[c] = float(statistics.median(row_merit(r, c, view) for r in rows))
+            seconds[c] = float(statistics.median([r["malvar"]["seconds"] if c == "malvar" else r["gains"][c]["seconds"]
+                                          for r in rows]))
+    if pick is None:
+        best = max(worst.values())
+        pick = max((c for c in worst if worst[c] >= best - tie_db), key=lambda c: (median[c], worst[c]))
+    ratios = [r["lens_ratio"] for r in rows if r.get("lens_ratio") is not None]
+    return {"sigma_from": lo, "sigma_to": hi, "candidate": pick, "view": view, "captures": len(rows),
+            "worst_gain_db": worst[pick], "median_gain_db": median[pick], "tie_db": tie_db,
+            "worst_gains_db": worst, "median_gains_db": median, "median_seconds": seconds,
+            "lens_ratio_range": [min(ratios), max(ratios)] if ratios else None}
+
+
+def fit_rule(rows: list[dict], view: str, tie_db: float = TIE_DB) -> list[dict]:
+    """The sigma bands of ``rows`` (research/fit_auto.py) with, in each, the candidate of the best worst-case
+    gain over Malvar on ``view``; among those within ``tie_db`` of it, the one of the largest median
+    :func:`row_merit` (the gain; for ``both`` the mean of the two views' gains).
+
+    Malvar is a candidate (gain 0), so no band's pick is more than ``tie_db`` worse than Malvar on any
+    of its training captures. Neighbouring bands with the same pick are merged.
+    """
+    edges = _band_edges(rows)
+    bands = []
+    for lo, hi in itertools.pairwise(edges):
+        inside = [r for r in rows if lo <= r["sigma"] < hi]
+        if not inside:
+            continue
+        band = _band(inside, lo, hi, view, tie_db)
+        if bands and bands[-1]["candidate"] == band["candidate"]:
+            lo = bands.pop()["sigma_from"]
+            band = _band([r for r in rows if lo <= r["sigma"] < hi], lo, hi, view, tie_db, band["candidate"])
+        bands.append(band)
+    return bands
+
+
+def fit_rules(rows: list[dict], tie_db: float = TIE_DB) -> dict:
+    """The rule file's contents from research/fit_auto.py's rows: a rule per view, over every training capture.
+
+    One rule for all content: a class of its own for content like the real light fields (cross-lens ratio
+    below 2.6: of the training captures only finetexture, two a level) picked admm-uv-xc at strength 2 in
+    one band, 1.9 dB below Malvar on the held-out Lytro frame at 12 lux (docs/auto.md), so it went.
+    """
+    rules = {view: fit_rule(rows, view, tie_db) for view in VIEWS}
+    return {"criterion": "per sigma band, the candidate of the best worst-case PSNR gain over Malvar on the "
+                         f"training captures (lower of centre view and mean image for 'both'); within {tie_db:g} "
+                         "dB of it, the largest median gain",
+            "captures": sorted({r["capture"] for r in rows}),
+            "rules": rules}
+
+
+def parse_candidate(name: str) -> tuple[str, float, str]:
+    """'method[@strength][:start]' -> (method, strength, start).
+
+    'admm-uv@2' -> ('admm-uv', 2.0, 'malvar'); 'admm-uv-xc@1:linear4d' -> ('admm-uv-xc', 1.0, 'linear4d');
+    'malvar' -> ('malvar', 1.0, 'malvar').
+    """
+    name, _, start = name.partition(":")
+    method, _, strength = name.partition("@")
+    return method, float(strength) if strength else 1.0, start or "malvar"
+
+
+def band_for(sigma: float, rule=None, view: str = "both") -> tuple[dict, str]:
+    """The band of ``rule`` (default: the shipped one for ``view``) that holds ``sigma``, or the nearest,
+    and where it lies."""
+    bands = load_rule(view) if rule is None else tuple(sorted(rule, key=lambda b: b["sigma_from"]))
+    inside = [b for b in bands if b["sigma_from"] <= sigma < b["sigma_to"]]
+    if inside:
+        return inside[0], "in"
+    if sigma < bands[0]["sigma_from"]:
+        return bands[0], "below the trained range; nearest band"
+    return bands[-1], "above the trained range; nearest band"
+
+
+def replacement(choice: AutoChoice, why: str, method: str | None = None, strength: float | None = None
+                ) -> tuple[AutoChoice, dict]:
+    """What runs instead of ``choice``, which cannot run here (``why``): ``method`` (default: the
+    choice's) at ``strength`` (default: the choice's) from the Malvar start; and the ``replaced``
+    entry of ``parameters["auto"]`` (lfcl/demosaic/auto_report.py lists it)."""
+    method = choice.method if method is None else method
+    strength = choice.strength if strength is None else strength
+    at = f" at strength {strength:g}" if strength != 1 else ""
+    ran = AutoChoice(method, strength, choice.sigma, f"{choice.reason}; {why}, so {method}{at} from a Malvar start",
+                     "malvar", choice.lens_ratio, choice.seen_content, choice.view)
+    return ran, {"method": choice.method, "strength": choice.strength, "start": choice.start, "why": why}
+
+
+def for_pitch(choice: AutoChoice, pitch) -> tuple[AutoChoice, dict | None]:
+    """``choice`` and None if it runs on lenses of ``pitch``, else :func:`replacement`'s pair:
+    linear4d (as the method or the start, the guarded start included) has coefficients for one pitch only."""
+    if "linear4d" not in (choice.method, choice.start) and choice.start != "guarded":
+        return choice, None
+    from ..ops.linear4d import load_model
+
+    fitted, pitch = tuple(load_model().pitch), tuple(int(p) for p in pitch)
+    if pitch == fitted:
+        return choice, None
+    why = f"linear4d has coefficients for {fitted[0]}x{fitted[1]} lenses only, not {pitch[0]}x{pitch[1]}"
+    return replacement(choice, why, *((AUTO_FALLBACK, 1.0) if choice.method == "linear4d" else ()))
+
+
+def choose(sigma: float, rule=None, lens_ratio: float | None = None, view: str = "both",
+           rules: dict | None = None) -> AutoChoice:
+    """The method and strength for noise level ``sigma``: from the sigma bands ``rule`` if given, else
+    from the rule file's contents ``rules`` (default: the shipped file), its rule for ``view``
+    (``VIEWS``: what its gains were judged on).
+
+    ``lens_ratio``: the raw's cross-lens ratio (lfcl/demosaic/lens_ratio.py), recorded; when it lies outside what
+    the band's training captures spanned, the reason says that the rule has not seen such content.
+    """
+    if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma >= 0):
+        raise ValueError(f"auto needs a finite noise level >= 0, got {sigma!r}")
+    check_view(view)
+    if rule is None:
+        rule = rule_bands(load_rules() if rules is None else rules, view)
+        if not rule:
+            raise ValueError(f"the auto rule holds no rule for view {view!r}: refit it with research/fit_auto.py")
+    band, where = band_for(sigma, rule)
+    method, strength, start = parse_candidate(band["candidate"])
+    reason = (f"sigma {sigma:.3g} {where} {band['sigma_from']:.3g}-{band['sigma_to']:.3g}: on its "
+              f"{band['captures']} training captures {band['candidate']} had the best worst-case PSNR gain over "
+              f"Malvar ({VIEW_WORDS[view]}), within {band['tie_db']:g} dB, and the largest median gain "
+              f"({band['worst_gain_db']:+.2f} dB worst, {band['median_gain_db']:+.2f} dB median)")
+    seen = None
+    trained = band.get("lens_ratio_range")
+    if lens_ratio is not None and trained:
+        seen = trained[0] <= lens_ratio <= trained[1]
+        if not seen:
+            reason += (f"; the raw's cross-lens ratio {lens_ratio:.2f} lies outside the {trained[0]:.2f}-"
+                       f"{trained[1]:.2f} of those captures, so the rule has not seen such content")
+    return AutoChoice(method, strength, float(sigma), reason, start, lens_ratio, seen, view)

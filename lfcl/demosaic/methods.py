@@ -1,0 +1,476 @@
+"""The demosaic/denoise methods and their defaults: one place for both.
+
+``malvar``     2D Malvar-He-Cutler on the whole lenslet mosaic (the paper's baseline).
+``admm-uv``    ADMM-TV with the prior over (u, v): within each microlens.
+``admm-st``    ADMM-TV over (s, t): across microlenses, within each view.
+``admm-uvst``  ADMM-TV over all four dims.
+``linear4d``   a learned 4D linear filter per CFA phase and (u, v), coefficients by noise level
+               (docs/linear4d.md); no iterations, no Malvar start.
+``admm-uv-xc``, ``admm-uvst-xc``  ADMM with TV plus the cross-channel prior
+               ``lam_xc ||D (x_R - x_G)||_1 + lam_xc ||D (x_B - x_G)||_1`` over (u, v),
+               resp. (u, v, s, t) (docs/admm.md, "The cross-channel prior").
+``admm-epi``   ADMM with differences along each sample's epipolar line, the disparity estimated from
+               the raw (lfcl.depth), and a (u, v) fall-back where its confidence is low
+               (lfcl/solvers/epi.py; docs/admm.md, "admm-epi").
+
+Every ADMM method starts from the Malvar result. Its defaults follow the noise
+level ``sigma`` (rms noise per raw pixel, normalised units) estimated from the raw
+(lfcl/noise.py): ``lam = lam_per_sigma * sigma`` and, for the early-stopped
+methods, stop when ``rms(x_k - x_{k-1}) <= change_per_sigma * sigma``. The
+numbers come from the sweep documented in docs/admm.md. The cross-channel weight
+follows sigma the same way, ``lam_xc = xc_per_sigma * sigma`` (with an explicit
+lam it keeps its default ratio to lam). ``strength`` multiplies lam (and lam_xc)
+for scenes that want more or less smoothing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+
+from ..device import get_runtime
+from ..grid.vignetting import flat_field
+from ..noise.model import NoiseEstimate, estimate_noise
+from ..ops.flatlens import LensFlatness
+from ..ops.lenscopy import LensCopy
+from ..ops.malvar import Malvar
+from ..ops.reduce import Reductions
+from ..solvers.admm import AdmmSolver, solver_bytes, solver_largest_buffer
+from ..solvers.params import AdmmParams
+from .flat_lenses import FLAT_P, SKIPPABLE, fill_flat, flat_lenses, pack_lenses
+from .names import METHODS, STARTS
+
+
+@dataclasses.dataclass(frozen=True)
+class AdmmDefaults:
+    """How an ADMM method's parameters follow the noise level."""
+
+    dims: str
+    lam_per_sigma: float
+    change_per_sigma: float  # 0: no early stop on the change of x
+    max_iter: int
+    rho: float = 0.3
+    cg_steps: int = 4
+    xc_per_sigma: float = 0.0  # cross-channel prior weight / sigma; 0: no cross-channel prior
+    fb_per_sigma: float = 0.0  # admm-epi's fall-back weight lam_fb / sigma (dims "epi": lfcl/solvers/epi.py)
+
+
+# From the sweep in docs/admm.md (python research/sweep.py): the rule with the best
+# worst-case centre-view gain over Malvar across charts/deadleaves at 1-50 lux, among
+# rules that never lose more than 0.3 dB on the mean image.
+ADMM_DEFAULTS = {
+    "admm-uv": AdmmDefaults(dims="uv", lam_per_sigma=0.1, change_per_sigma=0.1, max_iter=60),
+    "admm-st": AdmmDefaults(dims="st", lam_per_sigma=0.01, change_per_sigma=0.0, max_iter=5),
+    "admm-uvst": AdmmDefaults(dims="uvst", lam_per_sigma=0.01, change_per_sigma=0.0, max_iter=10),
+    # From python research/sweep_xc.py (docs/admm.md, "The cross-channel prior"; training seeds 1, 2):
+    # uv-xc beats Malvar on PSNR and mean CIEDE2000 (centre, mean image) everywhere at 0.5-50 lux;
+    # uvst-xc, like uvst, stays close to Malvar because (s, t) smoothing costs deadleaves' mean image.
+    "admm-uv-xc": AdmmDefaults(dims="uv", lam_per_sigma=0.15, change_per_sigma=0.1, max_iter=45, xc_per_sigma=0.03),
+    "admm-uvst-xc": AdmmDefaults(dims="uvst", lam_per_sigma=0.03, change_per_sigma=0.05, max_iter=60,
+                                 xc_per_sigma=0.01),
+    # The prior along the epipolar lines (dims "epi", lfcl/solvers/epi.py), from research/fit_epi.py
+    # (docs/admm.md, "admm-epi"; training seed 1 of charts, deadleaves, finetexture, 48x48 lenses).
+    "admm-epi": AdmmDefaults(dims="epi", lam_per_sigma=0.3, change_per_sigma=0.0, max_iter=20, rho=1.0, cg_steps=5,
+                             fb_per_sigma=0.3),
+}
+
+
+def parse_method(method: str) -> str:
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}: expected one of {', '.join(METHODS)}")
+    return method
+
+
+def change_for_tolerance_db(tolerance_db: float) -> float:
+    """The rms change per iteration, in units of sigma, that moves PSNR by at most ``tolerance_db``.
+
+    If x_k has rms error e against the truth, then ||x_k+1 - t|| lies within e +- c
+    for an rms change c, so PSNR moves by at most -20 log10(1 - c/e) dB; where
+    e >= sigma, c <= (1 - 10^(-T/20)) sigma bounds the move by T dB. On the
+    built-in scenes e >= sigma from about 8 lux (charts) and 2 lux (deadleaves) up;
+    darker, the absolute errors are smaller and the bound is a guide (docs/auto.md).
+    """
+    if not (isinstance(tolerance_db, (int, float)) and math.isfinite(tolerance_db) and tolerance_db > 0):
+        raise ValueError(f"tolerance must be a number of dB > 0, got {tolerance_db!r}")
+    return 1.0 - 10.0 ** (-float(tolerance_db) / 20.0)
+
+
+def tolerance_db_for_change(change_per_sigma: float) -> float:
+    """The inverse of :func:`change_for_tolerance_db` (inf for a change of sigma or more)."""
+    return -20.0 * math.log10(1.0 - change_per_sigma) if change_per_sigma < 1 else math.inf
+
+
+def admm_params(method: str, sigma: float, *, lam=None, iterations=None, rho=None, strength=1.0,
+                tolerance_db=None) -> AdmmParams:
+    """The parameters ``method`` uses at noise level ``sigma`` (explicit values win).
+
+    ``tolerance_db``: stop once an iteration can move PSNR by less than this
+    (:func:`change_for_tolerance_db`) instead of the method's default rule; with
+    ``iterations`` as well, that many iterations at most.
+    """
+    d = ADMM_DEFAULTS[parse_method(method)]
+    if not (strength > 0):
+        raise ValueError(f"strength must be > 0, got {strength!r}")
+    sigma = max(float(sigma), 1e-6)
+    # the cross-channel weight keeps its default ratio to an explicit lam
+    lam_xc = (float(lam) * d.xc_per_sigma / d.lam_per_sigma if lam is not None and d.lam_per_sigma > 0
+              else strength * d.xc_per_sigma * sigma)
+    if tolerance_db is not None:
+        return AdmmParams(
+            lam=float(lam) if lam is not None else strength * d.lam_per_sigma * sigma,
+            rho=float(rho) if rho is not None else d.rho,
+            max_iter=int(iterations) if iterations is not None else max(d.max_iter, 60),
+            cg_steps=d.cg_steps,
+            change_tol=change_for_tolerance_db(tolerance_db) * sigma,
+            lam_xc=lam_xc,
+        )
+    return AdmmParams(
+        lam=float(lam) if lam is not None else strength * d.lam_per_sigma * sigma,
+        rho=float(rho) if rho is not None else d.rho,
+        max_iter=int(iterations) if iterations is not None else d.max_iter,
+        cg_steps=d.cg_steps,
+        # an explicit iteration count means "run that many"
+        change_tol=d.change_per_sigma * sigma if iterations is None else 0.0,
+        lam_xc=lam_xc,
+    )
+
+
+@dataclasses.dataclass
+class DemosaicResult:
+    planes: np.ndarray  # [3, H, W] float32, docs/layout.md
+    method: str
+    parameters: dict
+    iterations: int
+    seconds: float
+    stop_reason: str
+    history: list
+    noise: NoiseEstimate | None
+
+
+def _check_finite(planes: np.ndarray, what: str, mosaic: np.ndarray):
+    """A finite input can still overflow float32 (values near 3e38): say so, never return Inf."""
+    if not np.all(np.isfinite(planes)):
+        raise ValueError(f"{what} overflowed float32: the mosaic's values reach {float(np.abs(mosaic).max()):.3g}; "
+                         "a normalised raw should lie near [0, 1]")
+
+
+def lens_row_bands(lens_rows: int, per_row: tuple[int, int], limits: tuple[int, int]) -> list[tuple[int, int]]:
+    """Split ``lens_rows`` into bands [s0, s1) that fit the device.
+
+    per_row: (solver bytes, largest-buffer bytes) of one lens row; limits: (memory
+    budget, largest allocation) of the device.
+    """
+    per_band = max(1, min(limit // max(need, 1) for need, limit in zip(per_row, limits)))
+    return [(s0, min(s0 + per_band, lens_rows)) for s0 in range(0, lens_rows, per_band)]
+
+
+def flat_threshold_for(method: str, skip_flat) -> float | None:
+    """The p threshold ``demosaic_lightfield(skip_flat=...)`` tests lenses with (None: no test).
+
+    None or False: off (the default: on fine texture off the focal plane the chi-square test took
+    grain for noise and cost up to 5 dB, docs/auto.md); True: FLAT_P; a number in (0, 1): that
+    threshold, for the methods whose prior couples no two lenses.
+    """
+    if skip_flat is None or skip_flat is False:  # off by default: it took fine texture for noise (docs/auto.md)
+        return None
+    if method not in SKIPPABLE:
+        raise ValueError(f"skipping flat lenses needs a prior that couples no two lenses ({', '.join(SKIPPABLE)}), "
+                         f"not {method}")
+    if skip_flat is True:
+        return FLAT_P
+    if not isinstance(skip_flat, (int, float)) or not 0 < skip_flat < 1:
+        raise ValueError(f"skip_flat must be True, False or a p threshold in (0, 1), got {skip_flat!r}")
+    return float(skip_flat)
+
+
+def _noise_for_flat_test(noise, raw_mosaic, pattern, pitch, origin, asked) -> tuple:
+    """(the noise model the flat-lens test uses, None) or (None, why there is none).
+
+    Without a usable model the test cannot run; if it was not ``asked`` for (the default) the
+    lenses are all solved and the outputs say why, if it was, that is an error.
+    """
+    why = None
+    if noise is None:
+        try:
+            noise = estimate_noise(raw_mosaic, pattern, pitch, origin)
+        except ValueError as e:
+            why = f"not tested: no noise model ({e})"
+    if why is None and not all(math.isfinite(v) and 0 <= v < 1e30 for v in (noise.gain, noise.floor)):
+        why = f"not tested: the noise model (gain {noise.gain:.3g}, floor {noise.floor:.3g}) is out of range"
+    if why is not None and asked is not None:
+        raise ValueError(f"skipping flat lenses: {why.removeprefix('not tested: ')}")
+    return (None, why) if why is not None else (noise, None)
+
+
+def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
+                        lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
+                        device=None, callback=None, max_memory: int | None = None,
+                        lens_response=None, tolerance_db: float | None = None,
+                        start: str | None = None, skip_flat: bool | float | None = None,
+                        auto_view: str = "both", safety_net: bool = True) -> DemosaicResult:
+    """Demosaic (and denoise) a normalised lenslet mosaic [H, W] into [3, H, W] planes.
+
+    H and W must be whole multiples of the pitch (crop first). ``noise`` defaults to
+    an estimate from the mosaic (used by the ADMM methods only). ``max_memory``
+    (bytes, default: 80 % of the device's global memory) bounds the solver's device
+    buffers: a larger admm-uv problem runs in bands of lens rows, which is exact
+    because the (u, v) prior couples no two lenses (each band stops on its own rule);
+    the other priors couple neighbouring lenses and say so instead.
+    ``lens_response`` [U, V] (the white image's vignetting, lfcl/flatfield.py):
+    flat-field the mosaic, and for the ADMM methods weight the data term by the
+    response squared, leaving the dark corners out.
+    ``tolerance_db``: stop when an iteration can move PSNR by less than this many dB
+    (:func:`admm_params`); default: the method's own rule.
+    ``start`` (ADMM methods): the first estimate, ``"malvar"`` (the paper's, and the
+    default), ``"linear4d"`` (the learned 4D filter, which also reads the neighbouring
+    lenses: measured in docs/auto.md, it gains on textured and multi-plane scenes and
+    loses on large flat in-focus patches), ``"lens-malvar"`` (Malvar bounded to each
+    lens, so that no filter mixes two micro-images; docs/auto.md) or ``"guarded"`` (linear4d, with
+    Malvar in the lenses where the two disagree far more than in the rest of the frame: high-contrast
+    edges and clipped highlights, where linear4d breaks; lfcl/guarded_start.py, recorded in
+    ``parameters["start_guard"]``). ``auto`` takes the start its rule names.
+    ``auto_view`` (``auto`` only): the view its rule was judged on, ``"both"`` (the worse of
+    the centre view and the mean image), ``"center"`` or ``"mean"`` (lfcl.auto.view_for_outputs:
+    a run that writes only that view).
+    ``skip_flat`` (admm-uv, admm-uv-xc): lenses that are flat within the noise (a chi-square
+    test, lfcl/flat_lenses.py) get their colour means and the solve runs on the others only,
+    packed into a smaller mosaic; None: on for those methods at p threshold FLAT_P, True:
+    the same, False: off, a number: that p threshold. Recorded in ``parameters["flat_lenses"]``;
+    ``callback``'s x is then the packed mosaic's.
+    ``safety_net`` (every method but Malvar; on by default): each lens's colour means are
+    soft-thresholded towards Malvar's at the noise of a lens mean (lfcl/safety_net.py), so that no
+    lens's mean strays from Malvar's further than the noise explains; recorded in
+    ``parameters["safety_net"]``.
+    """
+    result = _demosaic_lightfield(mosaic, pattern, pitch, method, origin=origin, lam=lam, iterations=iterations,
+                                  rho=rho, strength=strength, noise=noise, device=device, callback=callback,
+                                  max_memory=max_memory, lens_response=lens_response,
+                                  tolerance_db=tolerance_db, start=start, skip_flat=skip_flat,
+                                  auto_view=auto_view, safety_net=safety_net)
+    if not safety_net or result.method in ("malvar", "auto") or method == "auto":
+        return result  # auto: its pick ran with the net already
+    return _with_safety_net(result, mosaic, pattern, pitch, origin, lens_response, device)
+
+
+def _with_safety_net(result: DemosaicResult, mosaic, pattern, pitch, origin, lens_response, device) -> DemosaicResult:
+    """``result`` after the safety net (lfcl/safety_net.py), on the mosaic the method saw."""
+    from .safety_net import apply_safety_net
+
+    began = time.perf_counter()
+    mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
+    noise, why = _noise_for_flat_test(result.noise, mosaic, pattern, pitch, origin, asked=None)
+    if noise is None:  # a raw too small to estimate the noise from: the outputs say the net did not act
+        report = {"lenses": 0, "lenses_from_malvar": 0, "why": why.replace("not tested", "not applied")}
+        return dataclasses.replace(result, parameters={**result.parameters, "safety_net": report})
+    if lens_response is not None:
+        mosaic, _ = flat_field(mosaic, lens_response)
+    planes, report = apply_safety_net(get_runtime(device), result.planes, mosaic, pattern, pitch, origin, noise)
+    _check_finite(planes, "the safety net", mosaic)
+    return dataclasses.replace(result, planes=planes, parameters={**result.parameters, "safety_net": report},
+                               seconds=result.seconds + time.perf_counter() - began, noise=noise)
+
+
+def _demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
+                        lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
+                        device=None, callback=None, max_memory: int | None = None,
+                        lens_response=None, tolerance_db: float | None = None,
+                        start: str | None = None, skip_flat: bool | float | None = None,
+                        auto_view: str = "both", safety_net: bool = True) -> DemosaicResult:
+    """:func:`demosaic_lightfield` without its safety net."""
+    method = parse_method(method)
+    mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
+    if mosaic.ndim != 2:
+        raise ValueError(f"mosaic must be 2D [H, W], got shape {mosaic.shape}")
+    U, V = pitch
+    if mosaic.shape[0] % U or mosaic.shape[1] % V:
+        raise ValueError(f"mosaic {mosaic.shape[0]}x{mosaic.shape[1]} is not a whole number of {U}x{V} lenses")
+    if not np.all(np.isfinite(mosaic)):
+        raise ValueError("mosaic holds NaN or Inf values")
+    if start not in (None, *STARTS):
+        raise ValueError(f"start must be one of {', '.join(STARTS)}, got {start!r}")
+    if method == "auto":  # choose the method and strength from the noise level (lfcl/auto.py), then run it
+        from .auto import choose, for_pitch
+        from .lens_ratio import cross_lens_ratio
+
+        noise = noise if noise is not None else estimate_noise(mosaic, pattern, pitch, origin)
+        lens_ratio = cross_lens_ratio(mosaic, pitch, noise, lens_response)  # is the content like the training's?
+        choice, replaced = for_pitch(choose(noise.sigma, lens_ratio=lens_ratio, view=auto_view), pitch)
+        result = demosaic_lightfield(mosaic, pattern, pitch, choice.method, origin=origin, lam=lam,
+                                     iterations=iterations, rho=rho, strength=strength * choice.strength,
+                                     noise=noise, device=device, callback=callback, max_memory=max_memory,
+                                     lens_response=lens_response, tolerance_db=tolerance_db,
+                                     start=start if start is not None else choice.start,
+                                     skip_flat=skip_flat if choice.method in SKIPPABLE else None,
+                                     safety_net=safety_net)
+        result.parameters = {**result.parameters, "auto": {**choice.as_dict(),
+                                                           **({"replaced": replaced} if replaced else {})}}
+        return result
+    flat_threshold = flat_threshold_for(method, skip_flat)
+    raw_mosaic, lens_weights = mosaic, None
+    if lens_response is not None:
+        mosaic, lens_weights = flat_field(mosaic, lens_response)
+    runtime = get_runtime(device)
+    began = time.perf_counter()
+    if method == "linear4d":  # learned 4D linear filter, coefficients picked by the noise (docs/linear4d.md)
+        from ..ops.linear4d import linear4d
+
+        noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
+        planes = linear4d(runtime, mosaic, pattern, pitch, origin, noise)
+        _check_finite(planes, "linear4d", mosaic)
+        return DemosaicResult(planes, method, {}, 0, time.perf_counter() - began, "direct", [], noise)
+    b = runtime.to_device(mosaic)
+    if method == "admm-epi" and start is None:  # its start follows the noise (lfcl/solvers/epi.py EPI_SCHEDULE)
+        from ..solvers.epi import epi_setting
+
+        noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
+        start = epi_setting(max(noise.sigma, 1e-6)).start
+    start = "malvar" if method == "malvar" else start or "malvar"
+    guard = None
+    if start in ("linear4d", "guarded"):
+        from ..ops.linear4d import linear4d_operator
+
+        noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
+        x0 = linear4d_operator(runtime, mosaic, pattern, pitch, origin, noise).forward(b)
+        if start == "guarded":  # Malvar in the lenses where linear4d breaks (lfcl/guarded_start.py)
+            from .guarded_start import guarded_start
+
+            malvar = Malvar(runtime, mosaic.shape, pattern, origin).forward(b)
+            x0, guard = guarded_start(runtime, x0, malvar, b, pitch, noise)
+            del malvar
+    else:  # lens-malvar: Malvar bounded to each lens, so that no filter reads a neighbouring micro-image
+        x0 = Malvar(runtime, mosaic.shape, pattern, origin, lens=pitch if start == "lens-malvar" else None).forward(b)
+    if method == "malvar":
+        planes = x0.get()
+        _check_finite(planes, "malvar", mosaic)
+        return DemosaicResult(planes, method, {}, 0, time.perf_counter() - began, "direct", [], None)
+    if not math.isfinite(Reductions(runtime).abs_sum(x0)):  # on the device: no 3-plane copy to the host
+        _check_finite(np.array([np.inf]), f"the {start} start", mosaic)
+    defaults = ADMM_DEFAULTS[method]
+    needs_sigma = lam is None or tolerance_db is not None or (iterations is None and defaults.change_per_sigma > 0) \
+        or defaults.dims == "epi"  # its iterations and lam_fb follow the noise (lfcl/solvers/epi.py)
+    if noise is None and needs_sigma:
+        noise = estimate_noise(raw_mosaic, pattern, pitch, origin)  # the noise of the raw, as lambda expects
+    sigma = noise.sigma if noise is not None else 0.0  # unused when lam and iterations are given
+    params = admm_params(method, sigma, lam=lam, iterations=iterations, rho=rho, strength=strength,
+                         tolerance_db=tolerance_db)
+    dims = ADMM_DEFAULTS[method].dims
+    found, packing, real, full_shape = None, None, None, (3, *mosaic.shape)
+    flat_noise, flat_why = None, "not tested (skip_flat off)"
+    if flat_threshold is not None:
+        flat_noise, flat_why = _noise_for_flat_test(noise, raw_mosaic, pattern, pitch, origin, asked=skip_flat)
+        noise = noise if noise is not None else flat_noise
+    if flat_noise is not None:  # flat lenses get their colour means and leave the solve (lfcl/flat_lenses.py)
+        statistics = LensFlatness(runtime, mosaic.shape, pattern, pitch, origin)(b, lens_weights, flat_noise.gain,
+                                                                                 flat_noise.floor)
+        found = flat_lenses(mosaic, pattern, pitch, flat_noise, origin=origin, lens_weights=lens_weights,
+                            threshold=flat_threshold, statistics=statistics)
+        packing = pack_lenses(~found.flat) if found.flat.any() else None
+        if packing is not None and packing.grid[0] == packing.full[0] and not found.flat.all():
+            packing = None  # too few to shrink the solver: packing, filling and a new size would only cost
+        if packing is not None:  # the lenses still to solve, side by side, on the device
+            real = packing.real
+            copy = LensCopy(runtime, pitch)
+            table = copy.upload(packing.pairs())
+            packed_shape = (packing.grid[0] * U, packing.grid[1] * V)
+            b = copy(b, runtime.empty(packed_shape), table)
+            x0 = copy(x0, runtime.empty((3, *packed_shape)), table)
+    H, W = b.shape
+    if dims == "epi":  # the prior along the epipolar lines, with the disparity from the raw (lfcl/solvers/epi.py)
+        from ..solvers.epi import demosaic_epi, epi_params
+
+        if tolerance_db is None:  # lam, lam_fb and the iterations follow the noise (EPI_SCHEDULE)
+            params, lam_fb = epi_params(params, sigma, lam=lam, iterations=iterations, strength=strength)
+        else:
+            lam_fb = params.lam * defaults.fb_per_sigma / defaults.lam_per_sigma
+        planes, extra, run = demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params, lam_fb, noise,
+                                          device, lens_weights, callback, max_memory)
+        parameters = {**dataclasses.asdict(params), "start": start, **extra}
+        if guard is not None:
+            parameters["start_guard"] = guard
+        return DemosaicResult(planes, method, parameters, run.iterations, time.perf_counter() - began,
+                              run.stop_reason, [dict(dataclasses.asdict(r), band=0) for r in run.history], noise)
+    budget = int(max_memory) if max_memory is not None else int(0.8 * runtime.device.global_mem_size)
+    needed = solver_bytes((H, W), dims, exact=dims == "uv", cross_channel=params.cross_channel)
+    largest = solver_largest_buffer((H, W), dims)
+    fits = needed <= budget and largest <= runtime.device.max_mem_alloc_size
+
+    def samples_in(rows: slice) -> int | None:
+        """The samples the stop rule's rms change is over, for these sensor rows (None: all of x).
+
+        Packed: the solved lenses' samples, not the padding's. The flat lenses are final and are
+        not counted either: counted with change 0 they stopped the busy lenses early, at up to
+        0.4 dB below the plain solve (docs/auto.md).
+        """
+        return None if real is None else int(real[rows.start // U:rows.stop // U].sum()) * 3 * U * V
+
+    def solve(solver, b, x0, samples):
+        return solver.solve(b, x0, params, callback=callback, lens_weights=lens_weights, samples=samples)
+
+    planes_packed = packing is not None  # planes on the host that hold the packed lenses only
+    if real is not None and not real.any():  # every lens is flat: nothing to solve
+        planes, runs, band_rows = np.zeros((3, H, W), np.float32), [], []
+    elif fits:
+        result = solve(AdmmSolver(runtime, (H, W), pattern, pitch, dims, origin), b, x0, samples_in(slice(0, H)))
+        x, runs, band_rows = result.x, [dataclasses.replace(result, x=None)], [H]
+        if packing is not None:  # the solved lenses back to their places and the flat ones' means, on the device
+            del b, x0, result  # the solver's buffers go; x and the full planes fit where the full start was
+            x = copy(x, runtime.empty(full_shape), copy.upload(packing.unpack_pairs()))
+            copy.fill(x, *found.flat_means())
+            planes_packed = False
+        planes = x.get()
+    elif dims == "uv":
+        per_row = (solver_bytes((U, W), dims, exact=True, cross_channel=params.cross_channel),
+                   solver_largest_buffer((U, W), dims))
+        bands = lens_row_bands(H // U, per_row, (budget, runtime.device.max_mem_alloc_size))
+        x0_host = x0.get()
+        del b, x0
+        if packing is not None:
+            mosaic = packing.pack(mosaic, pitch)
+        planes, runs = np.zeros_like(x0_host), []
+        band_rows, solver, solver_key = [], None, None
+        for s0, s1 in bands:
+            rows = slice(s0 * U, s1 * U)
+            if samples_in(rows) == 0:  # padding rows of a packed mosaic
+                continue
+            key = (rows.stop - rows.start, (origin[0] + rows.start) % 2)
+            if key != solver_key:  # one solver alive at a time: the budget is for one band's buffers
+                solver = None
+                solver, solver_key = AdmmSolver(runtime, (key[0], W), pattern, pitch, dims,
+                                                (origin[0] + rows.start, origin[1])), key
+            result = solve(solver, runtime.to_device(mosaic[rows]), runtime.to_device(x0_host[:, rows]),
+                           samples_in(rows))
+            planes[:, rows] = result.x.get()
+            runs.append(dataclasses.replace(result, x=None))  # the band's planes are on the host now
+            band_rows.append(rows.stop - rows.start)
+    else:
+        raise ValueError(
+            f"{method} on a {H}x{W} sensor needs about {needed / 2**30:.1f} GiB of device memory "
+            f"(largest buffer {largest / 2**30:.1f} GiB) but {runtime.name} allows {budget / 2**30:.1f} GiB "
+            f"(max allocation {runtime.device.max_mem_alloc_size / 2**30:.1f} GiB); its prior couples "
+            "neighbouring lenses, so it does not run in bands: use admm-uv, a crop, or a larger device"
+        )
+    if planes_packed:  # the solved lenses back to their places, the flat ones to their means
+        planes = fill_flat(packing.unpack(planes, np.empty(full_shape, np.float32), pitch), found, pitch)
+    if not np.all(np.isfinite(planes)):
+        raise FloatingPointError(f"{method} produced NaN/Inf values; try a smaller lambda or rho")
+    history = [dict(dataclasses.asdict(r), band=i) for i, run in enumerate(runs) for r in run.history]
+    counts = [run.iterations for run in runs]
+    reason = "every lens is flat: no iterations" if not runs else runs[0].stop_reason if len(runs) == 1 else (
+        f"{len(runs)} bands of lens rows, {min(counts)}-{max(counts)} iterations (mean over lens rows "
+        f"{np.average(counts, weights=band_rows):.1f}), each stopped by its own rule "
+        f"(last band: {runs[-1].stop_reason})")
+    parameters = dataclasses.asdict(params)
+    parameters["start"] = start
+    if guard is not None:
+        parameters["start_guard"] = guard
+    if found is not None:
+        parameters["flat_lenses"] = found.as_dict(packing.grid[0] if packing is not None else None)
+    elif dims == "uv":
+        parameters["flat_lenses"] = {"flat_lenses": 0, "why": flat_why}
+    return DemosaicResult(
+        planes, method, parameters, max((run.iterations for run in runs), default=0), time.perf_counter() - began,
+        reason, history, noise,
+    )

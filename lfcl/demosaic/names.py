@@ -1,0 +1,21 @@
+"""The names of the demosaic/denoise methods, importable without numpy (for `lfcl --help`).
+
+What each does and its defaults: lfcl/demosaic/methods.py.
+"""
+
+METHODS = ("auto", "malvar", "admm-uv", "admm-st", "admm-uvst", "linear4d", "admm-uv-xc", "admm-uvst-xc",
+           "admm-epi")
+
+#: What `lfcl process`, the Demosaic stage and the default recipe run when no method is named: the one method
+#: that, with the safety net, was at or above Malvar on both views on every cell of `lfcl bench matrix`
+#: (docs/auto.md, "Never worse than Malvar").
+DEFAULT_METHOD = "admm-uvst"
+
+#: The ADMM methods' first estimates: the paper's Malvar, the learned 4D filter, Malvar bounded to each lens,
+#: and the learned filter with Malvar in the lenses where the two disagree far more than elsewhere.
+STARTS = ("malvar", "linear4d", "lens-malvar", "guarded")
+
+#: The methods whose prior couples no two lenses, so that flat lenses can leave the solve
+#: (lfcl/demosaic/flat_lenses.py), and the chi-square p-value above which a lens counts as flat.
+SKIPPABLE = ("admm-uv", "admm-uv-xc")
+FLAT_P = 0.01

@@ -1,0 +1,1 @@
+"""`lfcl evaluate`: methods scored against a simulated capture's ground truth; metrics and plots."""

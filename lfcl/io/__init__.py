@@ -1,0 +1,1 @@
+"""Reading and writing files: raw decode, image writing (EXR/TIFF/PNG), the LinearRaw DNG."""

@@ -1,0 +1,1 @@
+"""The Poisson-Gaussian noise model of a lenslet raw, from its NoiseProfile or estimated from it."""

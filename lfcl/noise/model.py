@@ -1,0 +1,133 @@
+"""Noise level of a lenslet raw, estimated from the raw itself.
+
+Each microlens sees a small, smooth patch of the scene through its inner pixels.
+Per lens and colour we fit a plane ``a + b*u + c*v`` to that colour's samples in
+the inner ``(U-2) x (V-2)`` pixels (the rim is vignetted) and keep the residual
+variance; smooth patches leave almost pure noise. Binned by brightness, the
+variances follow the Poisson-Gaussian model ``var = gain * mean + floor``, fitted
+robustly (a low quantile per bin, see QUANTILE). ``sigma`` is the rms noise per raw pixel over the whole
+mosaic, in the normalised units of (raw - black) / (white - black).
+
+A DNG NoiseProfile (``var = S * x + O`` per plane), where present, gives the same
+model directly and takes precedence (see :func:`from_noise_profile`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+
+import numpy as np
+import scipy.special
+
+from ..layout import channel_map
+
+
+@dataclasses.dataclass(frozen=True)
+class NoiseEstimate:
+    gain: float  # variance per unit signal (shot noise)
+    floor: float  # variance at zero signal (read noise, dark current)
+    sigma: float  # rms noise per pixel over the mosaic
+    source: str  # "raw" (estimated) or "dng-noise-profile"
+
+    def sigma_at(self, level: float) -> float:
+        return math.sqrt(max(self.gain * level + self.floor, 0.0))
+
+
+# Lenses whose view of the scene is textured inflate the residual variance; flat
+# ones show only noise. So per brightness bin we take a low quantile of the lens
+# variances and rescale it by the same quantile of the pure-noise distribution
+# (sigma^2 chi^2_dof / dof), which is unbiased when at least that share of the lenses
+# in the bin is flat.
+QUANTILE = 0.2
+
+
+def _plane_residual_variances(block: np.ndarray, mask: np.ndarray):
+    """Per lens: (mean, residual variance) of the samples where ``mask`` is set.
+
+    block: [n_lenses, h, w] inner pixels of each lens; mask: [h, w] bool. The
+    variances come rescaled so that their QUANTILE-quantile is sigma^2 for pure noise.
+    """
+    rows, cols = np.nonzero(mask)
+    design = np.stack([np.ones(rows.size), rows - rows.mean(), cols - cols.mean()], axis=1)
+    projection = np.eye(rows.size) - design @ np.linalg.pinv(design)
+    samples = block[:, rows, cols].astype(np.float64)
+    residual = samples @ projection.T
+    dof = rows.size - design.shape[1]
+    to_sigma2 = dof / scipy.special.chdtri(dof, 1 - QUANTILE)  # the chi-square QUANTILE-quantile
+    return samples.mean(axis=1), (residual**2).sum(axis=1) / dof * to_sigma2
+
+
+def estimate_noise(mosaic: np.ndarray, pattern: str, pitch, origin=(0, 0), bins: int = 16) -> NoiseEstimate:
+    """Poisson-Gaussian noise model of a normalised lenslet mosaic [H, W]."""
+    U, V = pitch
+    H, W = mosaic.shape
+    S, T = H // U, W // V
+    if S < 2 or T < 2 or U < 4 or V < 4:
+        raise ValueError(f"too few lenses or pixels per lens ({S}x{T} lenses of {U}x{V}) to estimate the noise")
+    channels = channel_map((H, W), pattern, origin)
+    means, variances = [], []
+    # Lenses whose first pixel has the same Bayer parity share one sample layout.
+    for ps in range(min(2, S)):
+        for pt in range(min(2, T)):
+            rows = slice(ps * U, S * U, 2 * U) if U % 2 else slice(0, S * U, U)
+            cols = slice(pt * V, T * V, 2 * V) if V % 2 else slice(0, T * V, V)
+            lens_rows = np.arange(S * U)[rows]
+            lens_cols = np.arange(T * V)[cols]
+            if lens_rows.size == 0 or lens_cols.size == 0:
+                continue
+            r0, c0 = lens_rows[0], lens_cols[0]
+            lenses = np.stack([
+                mosaic[r + 1:r + U - 1, c + 1:c + V - 1] for r in lens_rows for c in lens_cols
+            ])
+            layout = channels[r0 + 1:r0 + U - 1, c0 + 1:c0 + V - 1]
+            for colour in range(3):
+                mask = layout == colour
+                if mask.sum() > 4:
+                    m, v = _plane_residual_variances(lenses, mask)
+                    means.append(m)
+                    variances.append(v)
+            if U % 2 == 0 and V % 2 == 0:
+                break
+        if U % 2 == 0 and V % 2 == 0:
+            break
+    means = np.concatenate(means)
+    variances = np.concatenate(variances)
+    keep = np.isfinite(means) & np.isfinite(variances)
+    means, variances = means[keep], variances[keep]
+    gain, floor = fit_noise_model(means, variances, bins)
+    level = float(np.mean(mosaic))
+    return NoiseEstimate(gain, floor, math.sqrt(max(gain * level + floor, 0.0)), "raw")
+
+
+def fit_noise_model(means: np.ndarray, variances: np.ndarray, bins: int) -> tuple[float, float]:
+    """(gain, floor) of var = gain * mean + floor, fitted to per-lens (mean, residual variance) pairs.
+
+    The pairs are binned by brightness (quantile bins with at least 8 members) and each
+    bin keeps a low quantile of its variances: textured lenses inflate the variance, flat
+    ones do not. Both coefficients are clipped at 0.
+    """
+    edges = np.unique(np.quantile(means, np.linspace(0, 1, bins + 1)))
+    centres, levels = [], []
+    for lo, hi in itertools.pairwise(edges):
+        inside = (means >= lo) & (means <= hi)
+        if inside.sum() >= 8:
+            centres.append(np.median(means[inside]))
+            levels.append(np.quantile(variances[inside], QUANTILE))
+    if len(centres) >= 2:
+        gain, floor = np.polyfit(centres, levels, 1)
+    else:
+        gain, floor = 0.0, float(np.quantile(variances, QUANTILE))
+    gain, floor = max(float(gain), 0.0), max(float(floor), 0.0)
+    if gain == 0.0 and floor == 0.0:
+        floor = float(np.quantile(variances, QUANTILE))
+    return gain, floor
+
+
+def from_noise_profile(profile, mosaic: np.ndarray) -> NoiseEstimate:
+    """The model of a DNG NoiseProfile ``[S1, O1, S2, O2, ...]`` (averaged over planes)."""
+    pairs = np.asarray(profile, dtype=np.float64).reshape(-1, 2)
+    gain, floor = float(pairs[:, 0].mean()), float(pairs[:, 1].mean())
+    level = float(np.mean(mosaic))
+    return NoiseEstimate(gain, floor, math.sqrt(max(gain * level + floor, 0.0)), "dng-noise-profile")

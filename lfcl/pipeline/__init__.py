@@ -1,0 +1,1 @@
+"""The pipeline as objects (Decode, Grid, Demosaic, Outputs) and the recipes that configure it."""

@@ -1,0 +1,560 @@
+"""`lfcl process` as small stage objects that compose into a :class:`Pipeline` (docs/stages.md).
+
+Contract (each stage is a callable; a wrong input is a one-line ``ValueError`` naming the stage
+and the problem, before any work):
+
+==================  ====================================  =============================================
+stage               takes                                 returns
+==================  ====================================  =============================================
+``Decode``          a path (str / PathLike)               :class:`lfcl.io.raw.Mosaic`
+``Grid``            a ``Mosaic``                          :class:`Gridded` (data, pitch, origin,
+                                                          lens_response, metadata; + mosaic, lenses,
+                                                          seconds, sampling)
+``Demosaic``        a ``Gridded``                         :class:`Demosaiced` (result, lightfield
+                                                          ``[S, T, U, V, 3]``, metadata, mosaic)
+``Outputs``         a ``Demosaiced`` and an output folder :class:`Written` (paths, plan, seconds)
+==================  ====================================  =============================================
+
+These objects are the one implementation: ``lfcl process`` and ``lfcl batch`` build a
+:class:`Pipeline` of them (lfcl/cli/commands/process.py) and run it, so a Pipeline and the
+commands with the same settings write the same files.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from ..demosaic.auto_report import skipped_by_auto
+from ..demosaic.names import DEFAULT_METHOD
+from ..io.raw import Mosaic
+
+DEFAULT_PITCH = 9
+DEFAULT_OUTPUTS = ("center", "mean", "lightfield")
+DEFAULT_REFOCUS = "-1:1:0.25"
+#: The grid kinds the Demosaic stage takes (``Gridded.metadata["geometry"]["grid"]``): an aligned
+#: square grid of integer pitch, sliced exactly (lfcl.demosaic.methods), and any other calibrated grid,
+#: demosaiced with the resampling inside the forward operator (lfcl.demosaic.resampled, docs/geometry.md).
+GRID_KINDS = ("aligned-square", "resampled")
+
+
+class Gridded(NamedTuple):
+    """The Grid stage's result: the sensor samples and where the lenses are on them.
+
+    * ``data``: ``[H, W]`` float32 sensor samples the Demosaic stage reads, normalised like
+      ``Mosaic.data``. For the ``aligned-square`` grid: the mosaic cropped to whole lenses,
+      ``H = S * pitch``, ``W = T * pitch``; for ``resampled``: the whole sensor.
+    * ``pitch``: samples per lens along u and along v of the light field (int; U = V = pitch;
+      for ``resampled`` the views per lens, ``round(pitch)`` of the calibration).
+    * ``origin``: sensor (row, col) of ``data[0, 0]``; the Bayer phase of ``data`` follows from it.
+    * ``lens_response``: ``[pitch, pitch]`` vignetting from a white image or calibration
+      weights (lfcl/grid/vignetting.py), or None (always None for ``resampled``: its sampling model
+      holds the per-pixel response).
+    * ``metadata``: JSON-friendly, recorded in every output file (so nothing run-dependent
+      such as timings): ``geometry`` always, with ``grid`` (the grid kind, one of
+      :data:`GRID_KINDS`), ``pitch`` [U, V], ``lenses`` [S, T], ``from`` (where the grid came
+      from) and ``first_lens_pixel`` (aligned) or ``packing``, ``features``, ``lens_origin``
+      (resampled); ``calibration`` and ``flat_field`` when they apply.
+    * ``mosaic``: the decoded raw (pattern, noise profile, colour metadata).
+    * ``lenses``: (S, T) of the light field.
+    * ``seconds``: parts of this stage worth timing apart (``calibrate`` with a white image).
+    * ``sampling``: for ``resampled``, the :class:`lfcl.grid.resampling.SamplingModel` (where every
+      regular sample lies on the sensor); None for ``aligned-square``.
+
+    The Demosaic stage refuses a kind it does not know.
+    """
+
+    data: np.ndarray
+    pitch: int
+    origin: tuple
+    lens_response: np.ndarray | None
+    metadata: dict
+    mosaic: Mosaic
+    lenses: tuple
+    seconds: dict = {}  # noqa: RUF012 (a NamedTuple default; never mutated)
+    sampling: object = None  # lfcl.grid.resampling.SamplingModel for the "resampled" kind
+
+
+class Demosaiced(NamedTuple):
+    """The demosaic stage's result."""
+
+    result: object  # lfcl.demosaic.methods.DemosaicResult
+    lightfield: np.ndarray  # [S, T, U, V, 3] float32
+    metadata: dict  # what every output file records (method, parameters, geometry, input, ...)
+    mosaic: Mosaic
+
+
+class Written(NamedTuple):
+    """The output stage's result."""
+
+    paths: list  # the files written, in order
+    plan: object  # lfcl.outputs.files.OutputPlan
+    seconds: dict  # kind -> write seconds
+
+
+def grid_words(geometry: dict) -> str:
+    """``hexagonal``, ``rotated, non-integer-pitch square`` or ``aligned square``: a grid kind in words."""
+    if geometry.get("grid") != "resampled":
+        return "aligned square"
+    if geometry.get("packing") == "hex":
+        return "hexagonal"
+    return f"{', '.join(geometry.get('features') or ['non-aligned'])} square"
+
+
+def check_method_for_grid(method: str, kind: str, what: str = "") -> None:
+    """A one-line ``ValueError`` when ``method`` does not run on a grid of ``kind`` (``what``: the grid, for the
+    message), naming the methods that do."""
+    if kind == "resampled":
+        from ..demosaic.resampled import GRID_METHOD_NAMES
+
+        if method not in GRID_METHOD_NAMES:
+            raise ValueError(f"method {method!r} does not run on {what or 'a resampled lens grid'}: the resampling "
+                             f"path (rotated, non-integer-pitch, hexagonal grids) takes {', '.join(GRID_METHOD_NAMES)}")
+
+
+def _need(value, kind, stage: str, what: str):
+    if not isinstance(value, kind):
+        raise ValueError(f"{stage} takes {what}, got {type(value).__name__}")
+
+
+class Decode:
+    """path -> :class:`lfcl.io.raw.Mosaic` (DNG, camera raw, or EXR/TIFF/PNG mosaic with ``pattern``)."""
+
+    name = "decode"
+
+    def __init__(self, pattern: str | None = None):
+        if pattern is not None and not isinstance(pattern, str):
+            raise ValueError(f"Decode: pattern must be a string like 'GRBG', got {pattern!r}")
+        self.pattern = pattern
+
+    def options(self) -> dict:
+        return {"pattern": self.pattern}
+
+    def __call__(self, path) -> Mosaic:
+        if not isinstance(path, (str, os.PathLike)):
+            raise ValueError(f"Decode takes a path, got {type(path).__name__}")
+        from ..io.raw import read_mosaic
+
+        try:
+            return read_mosaic(path, self.pattern)
+        except FileNotFoundError as e:  # read_mosaic's own message names the file
+            raise ValueError(str(e)) from None
+
+
+class Grid:
+    """Mosaic -> :class:`Gridded`: an aligned square lens grid from ``pitch`` (at pixel 0, 0),
+    a ``calibration`` file (``lfcl calibrate``) or a ``white`` image (calibrated first).
+    Give at most one; none means ``pitch=9``.
+
+    A calibration of an aligned square grid of integer pitch (lfcl.grid.aligned.fit_grid)
+    gives the ``aligned-square`` kind, sliced exactly; any other calibrated grid (rotated,
+    non-integer pitch, offset by a fraction of a pixel, hexagonal) the ``resampled`` kind
+    with its sampling model (lfcl.grid.resampling.sampling_model, docs/geometry.md)."""
+
+    name = "grid"
+
+    def __init__(self, pitch: int | None = None, calibration=None, white=None, pattern: str | None = None):
+        given = [n for n, v in (("pitch", pitch), ("calibration", calibration), ("white", white)) if v is not None]
+        if len(given) > 1:
+            raise ValueError(f"Grid: give the lens grid once, not {' and '.join(given)} together")
+        if pitch is not None and (isinstance(pitch, bool) or not isinstance(pitch, (int, np.integer)) or pitch < 2):
+            raise ValueError(f"Grid: pitch must be an integer >= 2, got {pitch!r}")
+        for name, value in (("calibration", calibration), ("white", white)):
+            if value is not None and not Path(value).is_file():
+                raise ValueError(f"Grid: {name} {str(value)!r} does not exist")
+        self.pitch, self.calibration, self.white, self.pattern = pitch, calibration, white, pattern
+
+    def options(self) -> dict:
+        return {"pitch": self.pitch, "calibration": None if self.calibration is None else str(self.calibration),
+                "white": None if self.white is None else str(self.white)}
+
+    def __call__(self, mosaic: Mosaic) -> Gridded:
+        _need(mosaic, Mosaic, "Grid", "a Mosaic (from Decode)")
+        from ..layout import LightFieldShape
+
+        meta: dict = {}
+        seconds: dict = {}
+        lens_response = None
+        if self.calibration is not None or self.white is not None:
+            from ..grid import calibrate_white, load_calibration
+            from ..grid.aligned import ALIGNED, calibration_metadata, fit_grid
+
+            if self.calibration is not None:
+                cal = load_calibration(self.calibration, mosaic.shape, mosaic.pattern)
+                how, what, src = "--calibration", f"calibration {self.calibration}", self.calibration
+            else:
+                start = time.perf_counter()
+                cal = calibrate_white(self.white, self.pattern)
+                cal.check(mosaic.shape, mosaic.pattern, what=Path(mosaic.source).name or "the raw")
+                seconds["calibrate"] = time.perf_counter() - start
+                how, what, src = "--white", f"white image {self.white}", self.white
+            geo = fit_grid(cal, what)
+            meta["calibration"] = calibration_metadata(cal, how, src, geo)
+            if geo["kind"] != ALIGNED:
+                return _resampled(mosaic, cal, geo, how, meta, seconds)
+            P, (r0, c0), (S, T) = geo["pitch"], geo["first"], geo["lenses"]
+            if cal.weight is not None:  # the white image's vignetting: flat-field, weight the data term
+                from ..grid.vignetting import lens_response_from_calibration
+
+                lens_response = lens_response_from_calibration(cal, (P, P))
+                meta["flat_field"] = {
+                    "lens_response": np.round(lens_response, 4).tolist(),
+                    "left_out_below": 0.2, "data_term_weight": "response^2 (docs: lfcl/grid/vignetting.py)"}
+        else:
+            P, (r0, c0) = self.pitch or DEFAULT_PITCH, (0, 0)
+            how = "--pitch" if self.pitch is not None else "default pitch"
+            full = LightFieldShape.from_sensor(mosaic.shape, (P, P))
+            S, T = full.S, full.T
+        H, W = LightFieldShape(S, T, P, P).sensor_shape
+        meta["geometry"] = {"grid": "aligned-square", "pitch": [P, P], "lenses": [S, T],
+                            "first_lens_pixel": [r0, c0], "from": how}
+        return Gridded(mosaic.data[r0:r0 + H, c0:c0 + W], int(P), (r0, c0), lens_response, meta, mosaic, (S, T),
+                       seconds)
+
+
+def _resampled(mosaic: Mosaic, cal, geo: dict, how: str, meta: dict, seconds: dict) -> Gridded:
+    """The ``resampled`` kind of a calibrated grid: the whole sensor and its sampling model."""
+    from ..grid.resampling import sampling_model
+
+    sampling = sampling_model(cal, mosaic.pattern)
+    (U, V), (S, T) = sampling.views, sampling.lenses
+    meta["geometry"] = {"grid": "resampled", "pitch": [U, V], "lenses": [S, T], "from": how,
+                        "packing": cal.grid.packing, "features": list(geo["features"]),
+                        "lens_origin": list(sampling.lens_origin)}
+    if cal.weight is not None:
+        meta["flat_field"] = {"response": "the calibration's weight model, micro-image cores scaled to median 1",
+                              "left_out_below": sampling.threshold,
+                              "data_term_weight": "response^2 (docs/geometry.md)"}
+    return Gridded(mosaic.data, int(U), (0, 0), None, meta, mosaic, (S, T), seconds, sampling)
+
+
+class Demosaic:
+    """Gridded -> :class:`Demosaiced` with ``lfcl.demosaic.methods.demosaic_lightfield`` (``aligned-square``) or
+    ``lfcl.demosaic.resampled.demosaic_resampled`` (``resampled``: auto, malvar, admm-uv, admm-st, admm-uvst).
+
+    ``lam``/``iterations`` ``None``: follow the noise level (docs/admm.md); ``strength``
+    multiplies the default lambda. ``tolerance_db``: stop the ADMM iterations once one can
+    move PSNR by less than this (docs/auto.md); None: the method's own rule.
+    ``max_memory``: device bytes the solver may use (None: 80 % of the device's; a larger
+    admm-uv problem on an aligned grid runs in bands of lens rows).
+    ``start``: the ADMM methods' first estimate (``lfcl.demosaic.methods.STARTS``; aligned grids only), None:
+    the method's (Malvar; ``auto``: the one its rule names).
+    ``skip_flat``: leave lenses that are flat within the noise out of the solve and give them their
+    colour means (lfcl/demosaic/flat_lenses.py; admm-uv, admm-uv-xc, aligned grids); None or False: off (the
+    default), True or a p threshold in (0, 1): on.
+    ``safety_net``: keep every lens's colour means within the noise of Malvar's (lfcl/demosaic/safety_net.py;
+    aligned grids; on by default).
+    ``auto_view``: with ``auto``, the view its rule was judged on (lfcl.demosaic.auto.VIEWS; ``lfcl process``
+    passes lfcl.demosaic.auto.view_for_outputs of its outputs).
+    ``device``: an OpenCL device spec or None (``LFCL_DEVICE``, else the first device).
+    ``callback(record, x)``: called after every ADMM iteration (progress bars)."""
+
+    name = "demosaic"
+
+    def __init__(self, method: str = DEFAULT_METHOD, lam: float | None = None, iterations: int | None = None,
+                 strength: float = 1.0, device=None, callback=None, max_memory: int | None = None,
+                 tolerance_db: float | None = None, start: str | None = None,
+                 skip_flat: bool | float | None = None, auto_view: str = "both", safety_net: bool = True):
+        from ..demosaic.auto import check_view
+        from ..demosaic.methods import STARTS, flat_threshold_for, parse_method
+
+        try:
+            self.method = parse_method(method)
+        except ValueError as e:
+            raise ValueError(f"Demosaic: {e}") from None
+        if lam is not None and (isinstance(lam, bool) or not isinstance(lam, (int, float)) or not lam >= 0):
+            raise ValueError(f"Demosaic: lam must be a number >= 0 or None, got {lam!r}")
+        if iterations is not None and (isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer))
+                                       or iterations < 1):
+            raise ValueError(f"Demosaic: iterations must be an integer >= 1 or None, got {iterations!r}")
+        if isinstance(strength, bool) or not isinstance(strength, (int, float)) or not strength > 0:
+            raise ValueError(f"Demosaic: strength must be a number > 0, got {strength!r}")
+        if max_memory is not None and (isinstance(max_memory, bool) or not isinstance(max_memory, (int, np.integer))
+                                       or max_memory < 1):
+            raise ValueError(f"Demosaic: max_memory must be a number of bytes >= 1 or None, got {max_memory!r}")
+        if tolerance_db is not None and (isinstance(tolerance_db, bool) or not isinstance(tolerance_db, (int, float))
+                                         or not math.isfinite(tolerance_db) or not tolerance_db > 0):
+            raise ValueError(f"Demosaic: tolerance_db must be a number of dB > 0 or None, got {tolerance_db!r}")
+        self.tolerance_db = None if tolerance_db is None else float(tolerance_db)
+        if start is not None and start not in STARTS:
+            raise ValueError(f"Demosaic: start must be one of {', '.join(STARTS)} or None, got {start!r}")
+        self.start = start
+        try:  # auto passes it on to the method it picks, so check the value as for admm-uv
+            flat_threshold_for("admm-uv" if self.method == "auto" else self.method, skip_flat)
+        except ValueError as e:
+            raise ValueError(f"Demosaic: {e}") from None
+        self.skip_flat = skip_flat
+        if not isinstance(safety_net, bool):
+            raise ValueError(f"Demosaic: safety_net must be True or False, got {safety_net!r}")
+        self.safety_net = safety_net
+        try:
+            self.auto_view = check_view(auto_view)
+        except ValueError as e:
+            raise ValueError(f"Demosaic: {e}") from None
+        self.lam, self.iterations, self.strength = lam, iterations, float(strength)
+        self.max_memory = None if max_memory is None else int(max_memory)
+        self.device, self.callback = device, callback
+
+    def options(self) -> dict:
+        return {"method": self.method, "lambda": self.lam, "iterations": self.iterations, "strength": self.strength,
+                "tolerance_db": self.tolerance_db, "max_memory": self.max_memory, "start": self.start,
+                "skip_flat": self.skip_flat, "safety_net": self.safety_net, **({"auto_view": self.auto_view} if self.method == "auto" else {})}
+
+    def __call__(self, gridded: Gridded) -> Demosaiced:
+        _need(gridded, Gridded, "Demosaic", "a Gridded (from Grid)")
+        kind = gridded.metadata.get("geometry", {}).get("grid")
+        if kind not in GRID_KINDS:
+            raise ValueError(f"Demosaic: lens grid {kind!r} is not one it takes ({', '.join(GRID_KINDS)})")
+        if kind == "resampled" and gridded.sampling is None:
+            raise ValueError("Demosaic: a resampled lens grid needs its sampling model (Gridded.sampling)")
+        try:
+            check_method_for_grid(self.method, kind, f"the {grid_words(gridded.metadata['geometry'])} lens grid")
+        except ValueError as e:
+            raise ValueError(f"Demosaic: {e}") from None
+        from .. import __version__
+        from ..noise.model import from_noise_profile
+
+        mosaic, P = gridded.mosaic, gridded.pitch
+        noise = None
+        if mosaic.noise_profile is not None and self.method != "malvar":
+            noise = from_noise_profile(mosaic.noise_profile, gridded.data)
+        extra: dict = {}
+        if kind == "resampled":
+            from ..demosaic.resampled import demosaic_resampled
+
+            if self.start not in (None, "malvar"):
+                raise ValueError(f"Demosaic: start {self.start} needs an aligned square lens grid; this one is "
+                                 f"{grid_words(gridded.metadata['geometry'])} (use the default start)")
+            if self.skip_flat not in (None, False):
+                raise ValueError("Demosaic: skipping flat lenses needs an aligned square lens grid; this one is "
+                                 f"{grid_words(gridded.metadata['geometry'])} (leave skip_flat out)")
+            result = demosaic_resampled(gridded.data, mosaic.pattern, gridded.sampling, self.method, lam=self.lam,
+                                        iterations=self.iterations, strength=self.strength, noise=noise,
+                                        device=self.device, callback=self.callback, max_memory=self.max_memory,
+                                        tolerance_db=self.tolerance_db, auto_view=self.auto_view)
+            lightfield = result.lightfield
+            extra["sampling"] = result.sampling.as_meta()
+        else:
+            from ..demosaic.methods import demosaic_lightfield
+            from ..layout import LightFieldShape, planes_to_exchange
+
+            result = demosaic_lightfield(gridded.data, mosaic.pattern, (P, P), self.method, origin=gridded.origin,
+                                         lam=self.lam, iterations=self.iterations, strength=self.strength,
+                                         noise=noise, device=self.device, callback=self.callback,
+                                         lens_response=gridded.lens_response, max_memory=self.max_memory,
+                                         tolerance_db=self.tolerance_db, start=self.start,
+                                         skip_flat=self.skip_flat, auto_view=self.auto_view,
+                                         safety_net=self.safety_net)
+            S, T = gridded.lenses
+            lightfield = planes_to_exchange(result.planes, LightFieldShape(S, T, P, P))
+        meta = {
+            "method": self.method, "parameters": result.parameters, "source": mosaic.source,
+            "pattern": mosaic.pattern, "geometry": gridded.metadata["geometry"],
+            "iterations": result.iterations, "stop_reason": result.stop_reason,
+            "noise_sigma": None if result.noise is None else result.noise.sigma,
+            "input": mosaic.metadata(), "generator": f"lfcl {__version__} stages",
+            **{k: v for k, v in gridded.metadata.items() if k != "geometry"}, **extra,
+        }
+        return Demosaiced(result, lightfield, meta, mosaic)
+
+
+class Outputs:
+    """(Demosaiced, out_dir) -> :class:`Written`: ``lfcl.outputs.files.plan_outputs`` then ``write_outputs``
+    (all files or none). ``refocus``: slopes spec, used when ``refocus`` is among ``outputs``.
+    ``metadata``: extra keys every output file records (they win over the Demosaic stage's)."""
+
+    name = "outputs"
+
+    def __init__(self, outputs=DEFAULT_OUTPUTS, refocus: str = DEFAULT_REFOCUS, fmt: str = "exr",
+                 previews: bool = True, metadata: dict | None = None):
+        from ..outputs.files import parse_format, parse_outputs
+        from ..outputs.refocus import parse_slopes
+
+        try:
+            self.outputs = parse_outputs(outputs if isinstance(outputs, str) else ",".join(outputs))
+            self.fmt = parse_format(fmt)
+            self.slopes = parse_slopes(refocus) if "refocus" in self.outputs else []
+        except (ValueError, TypeError) as e:
+            raise ValueError(f"Outputs: {e}") from None
+        if not isinstance(previews, bool):
+            raise ValueError(f"Outputs: previews must be true or false, got {previews!r}")
+        self.refocus, self.previews, self.metadata = refocus, previews, dict(metadata or {})
+
+    def options(self) -> dict:
+        return {"outputs": list(self.outputs), "refocus": self.refocus, "format": self.fmt, "previews": self.previews}
+
+    def file_metadata(self, demosaiced: Demosaiced) -> dict:
+        """What every output file records: the Demosaic stage's metadata and this stage's ``metadata``."""
+        return {**demosaiced.metadata, **self.metadata}
+
+    def plan(self, demosaiced: Demosaiced):
+        """Compute every output asked for, in memory: an ``lfcl.outputs.files.OutputPlan`` (nothing written).
+
+        ``plan.seconds["previews-setup"]`` includes building the colour pipeline.
+        """
+        _need(demosaiced, Demosaiced, "Outputs", "a Demosaiced (from Demosaic)")
+        from ..outputs.files import plan_outputs
+
+        start = time.perf_counter()
+        colour = None
+        if self.previews:
+            from ..outputs.previews import ColourPipeline
+
+            colour = ColourPipeline.from_mosaic(demosaiced.mosaic)
+        colour_seconds = time.perf_counter() - start
+        camera = None
+        if self.fmt == "dng":  # the raw's names, colour matrix and white balance go into every DNG
+            from ..io.linear_dng import DngCamera
+
+            camera = DngCamera.from_mosaic(demosaiced.mosaic)
+        depth, depth_seconds = None, 0.0
+        if "depth" in self.outputs:  # from the raw itself, not from the demosaiced light field (docs/depth.md)
+            from ..depth.output import depth_from_mosaic
+
+            start = time.perf_counter()
+            depth = depth_from_mosaic(demosaiced.mosaic, demosaiced.metadata["geometry"])
+            depth_seconds = time.perf_counter() - start
+        plan = plan_outputs(demosaiced.lightfield, self.outputs, slopes=self.slopes, fmt=self.fmt,
+                            previews=self.previews, metadata=self.file_metadata(demosaiced), colour=colour,
+                            camera=camera, depth=depth)
+        if depth is not None:
+            plan.seconds["depth"] = plan.seconds.get("depth", 0.0) + depth_seconds
+        if "previews-setup" in plan.seconds:
+            plan.seconds["previews-setup"] += colour_seconds
+        return plan
+
+    def write(self, plan, out_dir, extra=(), seconds: dict | None = None) -> list:
+        """Write ``plan``'s files and then ``extra`` (``lfcl.outputs.files.PlannedFile``) into ``out_dir``: all or none.
+
+        ``seconds`` (kind -> write seconds) is filled in as the files are written.
+        """
+        if not isinstance(out_dir, (str, os.PathLike)):
+            raise ValueError(f"Outputs needs an output folder path, got {type(out_dir).__name__}")
+        from ..outputs.files import write_outputs
+
+        return write_outputs(out_dir, [*plan.files, *extra], seconds)
+
+    def __call__(self, demosaiced: Demosaiced, out_dir) -> Written:
+        _need(demosaiced, Demosaiced, "Outputs", "a Demosaiced (from Demosaic)")
+        if not isinstance(out_dir, (str, os.PathLike)):
+            raise ValueError(f"Outputs needs an output folder path, got {type(out_dir).__name__}")
+        plan = self.plan(demosaiced)
+        seconds: dict = {}
+        paths = self.write(plan, out_dir, seconds=seconds)
+        return Written(paths, plan, seconds)
+
+
+def _skipped_flat(record) -> list:
+    from ..demosaic.flat_lenses import skipped_flat_lenses  # scipy: not at import (lfcl --help)
+
+    return skipped_flat_lenses(record)
+
+
+def _skipped(plan, outputs: list) -> list:
+    """What was not computed and why (``refocus`` is also asked for by ``--refocus``)."""
+    if "refocus" in outputs:
+        return list(plan.skipped)
+    return [s if s["output"] != "refocus" else {"output": "refocus", "reason": "not asked for (--outputs, --refocus)"}
+            for s in plan.skipped]
+
+
+def _output_seconds(plan, compute: float, write: dict, files: int) -> dict:
+    """Per output kind: compute and write seconds and the number of files; ``total`` last."""
+    out = {kind: {"compute": plan.seconds.get(kind, 0.0), "write": write.get(kind, 0.0), "files": n}
+           for kind, n in plan.counts().items()}
+    if "previews-setup" in plan.seconds:
+        out["previews-setup"] = {"compute": plan.seconds["previews-setup"], "write": 0.0, "files": 0}
+    out["total"] = {"compute": compute, "write": sum(v for k, v in write.items() if k != "summary"), "files": files}
+    return out
+
+
+class Pipeline:
+    """Decode -> Grid -> Demosaic -> Outputs (in that order; Outputs optional).
+
+    ``run(path, out_dir)`` runs the stages and returns the summary (docs/outputs.md,
+    "summary.json"): the metadata every output records (method, parameters, geometry,
+    input, ...), ``lenses``, ``options`` (every stage's options, defaults included),
+    ``seconds`` (per stage: ``decode``, ``grid``, ``demosaic``, ``outputs``, and
+    ``calibrate`` when the grid came from a white image; ``grid`` is then the rest of that
+    stage), and with an Outputs stage ``format``, ``previews``, ``colour``, ``outputs``,
+    ``refocus``, ``skipped`` (with ``auto``: also the candidates it skipped, lfcl/demosaic/auto_report.py),
+    ``output_seconds``. With an Outputs stage the summary is also
+    written as ``summary.json``, last, with the other files: all of them or none.
+    ``finish(summary) -> summary`` (optional) edits the summary before it is written and
+    returned. After a run, ``pipeline.lightfield`` holds the light field.
+    """
+
+    ORDER = (Decode, Grid, Demosaic, Outputs)
+
+    def __init__(self, stages, recipe: dict | None = None):
+        stages = list(stages)
+        kinds = [type(s) for s in stages]
+        if kinds not in (list(self.ORDER), list(self.ORDER[:3])):
+            raise ValueError("Pipeline takes the stages Decode, Grid, Demosaic[, Outputs] in that order, got "
+                             + (", ".join(type(s).__name__ for s in stages) or "none"))
+        self.stages, self.recipe = stages, recipe
+
+    def options(self) -> dict:
+        out: dict = {}
+        for s in self.stages:
+            out.update(s.options())
+        return out
+
+    def run(self, path, out_dir=None, finish=None) -> dict:
+        decode, grid, demosaic = self.stages[:3]
+        outputs = self.stages[3] if len(self.stages) == 4 else None
+        if outputs is not None and not isinstance(out_dir, (str, os.PathLike)):
+            raise ValueError(f"Outputs needs an output folder path, got {type(out_dir).__name__}")
+        seconds: dict = {}
+
+        def timed(stage, value):
+            start = time.perf_counter()
+            value = stage(value)
+            seconds[stage.name] = time.perf_counter() - start
+            return value
+
+        mosaic = timed(decode, path)
+        gridded = timed(grid, mosaic)
+        if "calibrate" in gridded.seconds:  # report the white image's calibration apart
+            seconds["calibrate"] = gridded.seconds["calibrate"]
+            seconds["grid"] = max(0.0, seconds["grid"] - seconds["calibrate"])
+        demosaiced = timed(demosaic, gridded)
+        self.lightfield = demosaiced.lightfield
+        metadata = demosaiced.metadata if outputs is None else outputs.file_metadata(demosaiced)
+        summary = {**metadata, "lenses": list(demosaiced.lightfield.shape[:2]), "options": self.options()}
+        if self.recipe is not None and "recipe" not in summary:
+            summary["recipe"] = {k: self.recipe[k] for k in ("name", "path") if k in self.recipe}
+        summary["seconds"] = seconds
+
+        def done() -> dict:  # a fresh copy each time: ``finish`` may edit it
+            out = {**summary, "seconds": dict(seconds)}
+            return finish(out) if finish is not None else out
+
+        if outputs is None:
+            return done()
+
+        from ..outputs.files import PlannedFile
+
+        start = time.perf_counter()
+        plan = outputs.plan(demosaiced)
+        compute = time.perf_counter() - start
+        summary.update({"format": plan.image_format, "previews": plan.previews, "colour": plan.colour,
+                        "outputs": [f.name for f in plan.files], "refocus": plan.refocus,
+                        "skipped": _skipped(plan, outputs.outputs)
+                        + skipped_by_auto(demosaiced.metadata["parameters"].get("auto"))
+                        + _skipped_flat(demosaiced.metadata["parameters"].get("flat_lenses"))})
+        write: dict = {}
+
+        def final() -> dict:  # called when summary.json is written (last), and after
+            seconds["outputs"] = compute + sum(v for k, v in write.items() if k != "summary")
+            summary["output_seconds"] = _output_seconds(plan, compute, write, len(plan.files))
+            return done()
+
+        outputs.write(plan, out_dir, [PlannedFile("summary.json", "summary", "json", final)], write)
+        write.pop("summary", None)
+        return final()
