@@ -50,6 +50,6 @@ def apply_safety_net(runtime, planes: np.ndarray, mosaic: np.ndarray, pattern: s
         "lenses_kept": int(np.count_nonzero(replaced == 0)),
         "colour_means_from_malvar": int(replaced.sum()),
         "why": f"each lens colour mean within {k:g} noise sds of a lens mean of Malvar's takes Malvar's; "
-               f"the others move {k:g} sds towards it (lfcl/safety_net.py)",
+               f"the others move {k:g} sds towards it (lfcl/demosaic/safety_net.py)",
     }
     return out, report

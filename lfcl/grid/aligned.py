@@ -78,7 +78,7 @@ def aligned_geometry(cal, what: str = "the calibration") -> dict:
         packing = "hexagonal" if cal.grid.packing == "hex" else f"{', '.join(geo['features'])} square"
         raise ValueError(f"{what} describes a {packing} lens grid ({describe_grid(cal)}), not an aligned square "
                          f"grid of integer pitch (within {ALIGNED_TOLERANCE_PX:g} px): it is processed by "
-                         "resampling (lfcl.grid_demosaic)")
+                         "resampling (lfcl.demosaic.resampled)")
     return geo
 
 

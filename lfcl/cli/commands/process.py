@@ -79,7 +79,7 @@ _OPTIONS = (
                       "noise model) get their colour means and leave the ADMM solve (admm-uv, admm-uv-xc, auto's "
                       "picks; docs/auto.md). Default: solve every lens (the test took fine texture for noise)."),
     click.option("--safety-net/--no-safety-net", "safety_net", default=True, show_default=True,
-                 help="Keep every lens's colour means within the noise of Malvar's (lfcl/safety_net.py; "
+                 help="Keep every lens's colour means within the noise of Malvar's (lfcl/demosaic/safety_net.py; "
                       "docs/auto.md): never a mean image worse than Malvar's."),
     click.option("--flat-p", "flat_p", default=None, type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
                  metavar="P",
@@ -349,12 +349,12 @@ def summary_text(raw, out_dir, summary: dict) -> str:
     if geo["grid"] == "resampled":
         lines = [f"{raw} -> {out_dir}  ({S}x{T} lenses of {U}x{V} views from {geo['from']}, {summary['pattern']})",
                  f"path: resampled ({grid_words(geo)} grid): the regular light field "
-                 "is fitted to the sensor samples through the resampling (lfcl.grid_demosaic, docs/geometry.md)"]
+                 "is fitted to the sensor samples through the resampling (lfcl.demosaic.resampled, docs/geometry.md)"]
     else:
         lines = [f"{raw} -> {out_dir}  ({S}x{T} lenses of {U}x{V} px from {geo['from']}, {summary['pattern']}"
                  + (f", first lens at pixel {geo['first_lens_pixel'][0]},{geo['first_lens_pixel'][1]}"
                     if any(geo["first_lens_pixel"]) else "") + ")",
-                 "path: aligned square grid of integer pitch, sliced exactly (lfcl.methods)"]
+                 "path: aligned square grid of integer pitch, sliced exactly (lfcl.demosaic.methods)"]
     if "calibration" in summary:
         c = summary["calibration"]
         deviation = c["aligned_max_deviation_px"]
