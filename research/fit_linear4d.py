@@ -28,6 +28,7 @@ import dataclasses
 import time
 
 import numpy as np
+from training_scenes import training_planes
 
 from lfcl import __version__
 from lfcl.layout import exchange_to_planes
@@ -42,7 +43,6 @@ from lfcl.ops.linear4d import (
     tap_samples,
     valid_taps,
 )
-from training_scenes import training_planes
 
 DEFAULT_LUX = (0.5, 1.0, 2.0, 4.0, 8.0, 12.0, 25.0, 50.0)
 PATTERN = "GRBG"  # the simulator's default; coefficients are stored per CFA class, pattern-free

@@ -169,3 +169,12 @@ def test_bench_matrix_finds_the_real_light_fields_it_is_given(tmp_path):
     (tmp_path / "realdata" / "hci_epinet" / "antinous").mkdir(parents=True)
     assert real_lightfields(tmp_path) == {"antinous": str(tmp_path / "realdata" / "hci_epinet" / "antinous")}
     assert real_lightfields(tmp_path / "none") == {}
+
+
+def test_bench_api_times_the_public_call_against_its_peer():
+    result = _invoke(["bench", "api", "--size", "64x96", "--repeats", "2", "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    assert report["size"] == [64, 96] and report["repeats"] == 2
+    assert report["lfcl_malvar_seconds"] > 0 and report["colour_demosaicing_seconds"] > 0
+    assert report["speedup"] == pytest.approx(report["colour_demosaicing_seconds"] / report["lfcl_malvar_seconds"])

@@ -9,7 +9,6 @@ import zlib
 import numpy as np
 import pyopencl as cl
 import pytest
-
 from fit_linear4d import (  # research/, on sys.path through conftest.py
     DEFAULT_LAYOUT,
     DEFAULT_LUX,
@@ -20,6 +19,7 @@ from fit_linear4d import (  # research/, on sys.path through conftest.py
     solve,
     tap_layout,
 )
+
 from lfcl.layout import PATTERNS
 from lfcl.ops.linear4d import (
     CLASSES,
@@ -367,6 +367,7 @@ def test_shipped_model_keeps_a_flat_colour_field_on_the_device(runtime, pattern)
 def test_shipped_model_beats_malvar_on_a_held_out_training_scene():
     """A scene of the training generator that no set saw (seed 99): linear4d beats Malvar's PSNR."""
     from training_scenes import training_planes
+
     from lfcl.layout import exchange_to_planes
     from lfcl.ops.malvar import malvar_np
     from lfcl.sim import render_planes, simulate

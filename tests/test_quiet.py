@@ -26,12 +26,12 @@ def _env(tmp_path, **extra) -> dict:
 
 # --------------------------------------------------------------------------- start-up
 
-def test_help_imports_neither_numpy_nor_pyopencl():
+def test_help_imports_neither_numpy_nor_pyopencl(tmp_path):  # run away from the source tree
     code = ("import sys\nfrom lfcl.cli import cli\n"
             "try:\n    cli(['--help'], prog_name='lfcl')\nexcept SystemExit:\n    pass\n"
             "print('\\nIMPORTED', sorted(m for m in ('numpy', 'pyopencl', 'colour', 'matplotlib', 'dask', 'scipy') "
             "if m in sys.modules))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=tmp_path).stdout
     assert "process" in out and "batch" in out  # the commands are listed
     assert out.strip().splitlines()[-1] == "IMPORTED []"
 
@@ -60,7 +60,7 @@ def test_process_imports_no_plotting_or_dask(tmp_path):
             f"'--no-previews', '-o', {str(tmp_path / 'out')!r}], prog_name='lfcl')\n"
             "except SystemExit as e:\n    assert not e.code, e.code\n"
             "print('\\nIMPORTED', sorted(m for m in ('colour', 'matplotlib', 'dask') if m in sys.modules))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=tmp_path).stdout
     assert out.strip().splitlines()[-1] == "IMPORTED []"
 
 
@@ -123,12 +123,13 @@ def test_process_prints_nothing_on_stderr(tmp_path):
     # malvar: few programs to build (every program starts with common.cl, where PoCL's notes come from)
     args = [*LFCL, "process", str(cap / "raw.dng"), "--pitch", "9", "--method", "malvar", "--outputs", "center",
             "--no-previews", "--json"]
-    run = subprocess.run([*args, "-o", str(tmp_path / "out")], capture_output=True, text=True, env=_env(tmp_path))
+    run = subprocess.run([*args, "-o", str(tmp_path / "out")], capture_output=True, text=True, env=_env(tmp_path),
+                         cwd=tmp_path)  # `python -c` puts the working folder first on sys.path: not the source tree
     assert run.returncode == 0, run.stderr
     assert run.stderr == ""
     assert json.loads(run.stdout)["outputs"] == ["center.exr"]
 
     verbose = subprocess.run([*LFCL, "--verbose", *args[3:], "-o", str(tmp_path / "out2")],
-                             capture_output=True, text=True, env=_env(tmp_path / "out"))
+                             capture_output=True, text=True, env=_env(tmp_path / "out"), cwd=tmp_path)
     assert verbose.returncode == 0, verbose.stderr
     assert "lfcl: built kernels/" in verbose.stderr

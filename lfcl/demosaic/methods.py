@@ -10,12 +10,13 @@
                ``lam_xc ||D (x_R - x_G)||_1 + lam_xc ||D (x_B - x_G)||_1`` over (u, v),
                resp. (u, v, s, t) (docs/admm.md, "The cross-channel prior").
 ``admm-epi``   ADMM with differences along each sample's epipolar line, the disparity estimated from
-               the raw (lfcl.depth), and a (u, v) fall-back where its confidence is low
-               (lfcl/solvers/epi.py; docs/admm.md, "admm-epi").
+               the raw (lfcl.depth), and a (u, v) fall-back where its confidence is low; its lam, stop
+               and start (guarded below about 5e-3 sigma, else Malvar) follow the noise
+               (lfcl/solvers/epi.py EPI_SCHEDULE; docs/admm.md, "admm-epi").
 
 Every ADMM method starts from the Malvar result. Its defaults follow the noise
 level ``sigma`` (rms noise per raw pixel, normalised units) estimated from the raw
-(lfcl/noise.py): ``lam = lam_per_sigma * sigma`` and, for the early-stopped
+(lfcl/noise/model.py): ``lam = lam_per_sigma * sigma`` and, for the early-stopped
 methods, stop when ``rms(x_k - x_{k-1}) <= change_per_sigma * sigma``. The
 numbers come from the sweep documented in docs/admm.md. The cross-channel weight
 follows sigma the same way, ``lam_xc = xc_per_sigma * sigma`` (with an explicit
@@ -72,9 +73,11 @@ ADMM_DEFAULTS = {
     "admm-uvst-xc": AdmmDefaults(dims="uvst", lam_per_sigma=0.03, change_per_sigma=0.05, max_iter=60,
                                  xc_per_sigma=0.01),
     # The prior along the epipolar lines (dims "epi", lfcl/solvers/epi.py), from research/fit_epi.py
-    # (docs/admm.md, "admm-epi"; training seed 1 of charts, deadleaves, finetexture, 48x48 lenses).
-    "admm-epi": AdmmDefaults(dims="epi", lam_per_sigma=0.3, change_per_sigma=0.0, max_iter=20, rho=1.0, cg_steps=5,
-                             fb_per_sigma=0.3),
+    # (docs/admm.md, "admm-epi"; training seeds 1, 2 of charts, deadleaves, finetexture, 48x48 lenses).
+    # lam, lam_fb, the stop and the start follow the noise by lfcl/solvers/epi.py EPI_SCHEDULE (its rows
+    # from 2 lux up are these values); this entry gives rho, the CG steps and the tolerance_db path.
+    "admm-epi": AdmmDefaults(dims="epi", lam_per_sigma=0.1, change_per_sigma=0.05, max_iter=20, rho=1.0, cg_steps=5,
+                             fb_per_sigma=0.1),
 }
 
 
@@ -205,58 +208,8 @@ def _noise_for_flat_test(noise, raw_mosaic, pattern, pitch, origin, asked) -> tu
     return (None, why) if why is not None else (noise, None)
 
 
-def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
-                        lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
-                        device=None, callback=None, max_memory: int | None = None,
-                        lens_response=None, tolerance_db: float | None = None,
-                        start: str | None = None, skip_flat: bool | float | None = None,
-                        auto_view: str = "both", safety_net: bool = True) -> DemosaicResult:
-    """Demosaic (and denoise) a normalised lenslet mosaic [H, W] into [3, H, W] planes.
-
-    H and W must be whole multiples of the pitch (crop first). ``noise`` defaults to
-    an estimate from the mosaic (used by the ADMM methods only). ``max_memory``
-    (bytes, default: 80 % of the device's global memory) bounds the solver's device
-    buffers: a larger admm-uv problem runs in bands of lens rows, which is exact
-    because the (u, v) prior couples no two lenses (each band stops on its own rule);
-    the other priors couple neighbouring lenses and say so instead.
-    ``lens_response`` [U, V] (the white image's vignetting, lfcl/flatfield.py):
-    flat-field the mosaic, and for the ADMM methods weight the data term by the
-    response squared, leaving the dark corners out.
-    ``tolerance_db``: stop when an iteration can move PSNR by less than this many dB
-    (:func:`admm_params`); default: the method's own rule.
-    ``start`` (ADMM methods): the first estimate, ``"malvar"`` (the paper's, and the
-    default), ``"linear4d"`` (the learned 4D filter, which also reads the neighbouring
-    lenses: measured in docs/auto.md, it gains on textured and multi-plane scenes and
-    loses on large flat in-focus patches), ``"lens-malvar"`` (Malvar bounded to each
-    lens, so that no filter mixes two micro-images; docs/auto.md) or ``"guarded"`` (linear4d, with
-    Malvar in the lenses where the two disagree far more than in the rest of the frame: high-contrast
-    edges and clipped highlights, where linear4d breaks; lfcl/guarded_start.py, recorded in
-    ``parameters["start_guard"]``). ``auto`` takes the start its rule names.
-    ``auto_view`` (``auto`` only): the view its rule was judged on, ``"both"`` (the worse of
-    the centre view and the mean image), ``"center"`` or ``"mean"`` (lfcl.auto.view_for_outputs:
-    a run that writes only that view).
-    ``skip_flat`` (admm-uv, admm-uv-xc): lenses that are flat within the noise (a chi-square
-    test, lfcl/flat_lenses.py) get their colour means and the solve runs on the others only,
-    packed into a smaller mosaic; None: on for those methods at p threshold FLAT_P, True:
-    the same, False: off, a number: that p threshold. Recorded in ``parameters["flat_lenses"]``;
-    ``callback``'s x is then the packed mosaic's.
-    ``safety_net`` (every method but Malvar; on by default): each lens's colour means are
-    soft-thresholded towards Malvar's at the noise of a lens mean (lfcl/safety_net.py), so that no
-    lens's mean strays from Malvar's further than the noise explains; recorded in
-    ``parameters["safety_net"]``.
-    """
-    result = _demosaic_lightfield(mosaic, pattern, pitch, method, origin=origin, lam=lam, iterations=iterations,
-                                  rho=rho, strength=strength, noise=noise, device=device, callback=callback,
-                                  max_memory=max_memory, lens_response=lens_response,
-                                  tolerance_db=tolerance_db, start=start, skip_flat=skip_flat,
-                                  auto_view=auto_view, safety_net=safety_net)
-    if not safety_net or result.method in ("malvar", "auto") or method == "auto":
-        return result  # auto: its pick ran with the net already
-    return _with_safety_net(result, mosaic, pattern, pitch, origin, lens_response, device)
-
-
 def _with_safety_net(result: DemosaicResult, mosaic, pattern, pitch, origin, lens_response, device) -> DemosaicResult:
-    """``result`` after the safety net (lfcl/safety_net.py), on the mosaic the method saw."""
+    """``result`` after the safety net (lfcl/demosaic/safety_net.py), on the mosaic the method saw."""
     from .safety_net import apply_safety_net
 
     began = time.perf_counter()
@@ -273,13 +226,46 @@ def _with_safety_net(result: DemosaicResult, mosaic, pattern, pitch, origin, len
                                seconds=result.seconds + time.perf_counter() - began, noise=noise)
 
 
-def _demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
+def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
                         lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
                         device=None, callback=None, max_memory: int | None = None,
                         lens_response=None, tolerance_db: float | None = None,
                         start: str | None = None, skip_flat: bool | float | None = None,
                         auto_view: str = "both", safety_net: bool = True) -> DemosaicResult:
-    """:func:`demosaic_lightfield` without its safety net."""
+    """Demosaic (and denoise) a normalised lenslet mosaic [H, W] into [3, H, W] planes.
+
+    H and W must be whole multiples of the pitch (crop first). ``noise`` defaults to
+    an estimate from the mosaic (used by the ADMM methods only). ``max_memory``
+    (bytes, default: 80 % of the device's global memory) bounds the solver's device
+    buffers: a larger admm-uv problem runs in bands of lens rows, which is exact
+    because the (u, v) prior couples no two lenses (each band stops on its own rule);
+    the other priors couple neighbouring lenses and say so instead.
+    ``lens_response`` [U, V] (the white image's vignetting, lfcl/grid/vignetting.py):
+    flat-field the mosaic, and for the ADMM methods weight the data term by the
+    response squared, leaving the dark corners out.
+    ``tolerance_db``: stop when an iteration can move PSNR by less than this many dB
+    (:func:`admm_params`); default: the method's own rule.
+    ``start`` (ADMM methods): the first estimate, ``"malvar"`` (the paper's, and the
+    default), ``"linear4d"`` (the learned 4D filter, which also reads the neighbouring
+    lenses: measured in docs/auto.md, it gains on textured and multi-plane scenes and
+    loses on large flat in-focus patches), ``"lens-malvar"`` (Malvar bounded to each
+    lens, so that no filter mixes two micro-images; docs/auto.md) or ``"guarded"`` (linear4d, with
+    Malvar in the lenses where the two disagree far more than in the rest of the frame: high-contrast
+    edges and clipped highlights, where linear4d breaks; lfcl/demosaic/guarded_start.py, recorded in
+    ``parameters["start_guard"]``). ``auto`` takes the start its rule names.
+    ``auto_view`` (``auto`` only): the view its rule was judged on, ``"both"`` (the worse of
+    the centre view and the mean image), ``"center"`` or ``"mean"`` (lfcl.demosaic.auto.view_for_outputs:
+    a run that writes only that view).
+    ``skip_flat`` (admm-uv, admm-uv-xc): lenses that are flat within the noise (a chi-square
+    test, lfcl/demosaic/flat_lenses.py) get their colour means and the solve runs on the others only,
+    packed into a smaller mosaic; None or False: off (the default: the test took fine texture
+    for noise, docs/auto.md), True: on at p threshold FLAT_P, a number: that p threshold.
+    Recorded in ``parameters["flat_lenses"]``; ``callback``'s x is then the packed mosaic's.
+    ``safety_net`` (every method but Malvar; on by default): each lens's colour means are
+    soft-thresholded towards Malvar's at the noise of a lens mean (lfcl/demosaic/safety_net.py), so that no
+    lens's mean strays from Malvar's further than the noise explains; recorded in
+    ``parameters["safety_net"]``.
+    """
     method = parse_method(method)
     mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
     if mosaic.ndim != 2:
@@ -291,7 +277,7 @@ def _demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *
         raise ValueError("mosaic holds NaN or Inf values")
     if start not in (None, *STARTS):
         raise ValueError(f"start must be one of {', '.join(STARTS)}, got {start!r}")
-    if method == "auto":  # choose the method and strength from the noise level (lfcl/auto.py), then run it
+    if method == "auto":  # choose the method and strength from the noise level (lfcl/demosaic/auto.py), then run it
         from .auto import choose, for_pitch
         from .lens_ratio import cross_lens_ratio
 
@@ -320,7 +306,9 @@ def _demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *
         noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
         planes = linear4d(runtime, mosaic, pattern, pitch, origin, noise)
         _check_finite(planes, "linear4d", mosaic)
-        return DemosaicResult(planes, method, {}, 0, time.perf_counter() - began, "direct", [], noise)
+        result = DemosaicResult(planes, method, {}, 0, time.perf_counter() - began, "direct", [], noise)
+        return _with_safety_net(result, raw_mosaic, pattern, pitch, origin, lens_response, device) if safety_net \
+            else result
     b = runtime.to_device(mosaic)
     if method == "admm-epi" and start is None:  # its start follows the noise (lfcl/solvers/epi.py EPI_SCHEDULE)
         from ..solvers.epi import epi_setting
@@ -334,7 +322,7 @@ def _demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *
 
         noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
         x0 = linear4d_operator(runtime, mosaic, pattern, pitch, origin, noise).forward(b)
-        if start == "guarded":  # Malvar in the lenses where linear4d breaks (lfcl/guarded_start.py)
+        if start == "guarded":  # Malvar in the lenses where linear4d breaks (lfcl/demosaic/guarded_start.py)
             from .guarded_start import guarded_start
 
             malvar = Malvar(runtime, mosaic.shape, pattern, origin).forward(b)
@@ -362,7 +350,7 @@ def _demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *
     if flat_threshold is not None:
         flat_noise, flat_why = _noise_for_flat_test(noise, raw_mosaic, pattern, pitch, origin, asked=skip_flat)
         noise = noise if noise is not None else flat_noise
-    if flat_noise is not None:  # flat lenses get their colour means and leave the solve (lfcl/flat_lenses.py)
+    if flat_noise is not None:  # flat lenses get their colour means and leave the solve (lfcl/demosaic/flat_lenses.py)
         statistics = LensFlatness(runtime, mosaic.shape, pattern, pitch, origin)(b, lens_weights, flat_noise.gain,
                                                                                  flat_noise.floor)
         found = flat_lenses(mosaic, pattern, pitch, flat_noise, origin=origin, lens_weights=lens_weights,
@@ -390,8 +378,10 @@ def _demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *
         parameters = {**dataclasses.asdict(params), "start": start, **extra}
         if guard is not None:
             parameters["start_guard"] = guard
-        return DemosaicResult(planes, method, parameters, run.iterations, time.perf_counter() - began,
-                              run.stop_reason, [dict(dataclasses.asdict(r), band=0) for r in run.history], noise)
+        result = DemosaicResult(planes, method, parameters, run.iterations, time.perf_counter() - began,
+                                run.stop_reason, [dict(dataclasses.asdict(r), band=0) for r in run.history], noise)
+        return _with_safety_net(result, raw_mosaic, pattern, pitch, origin, lens_response, device) if safety_net \
+            else result
     budget = int(max_memory) if max_memory is not None else int(0.8 * runtime.device.global_mem_size)
     needed = solver_bytes((H, W), dims, exact=dims == "uv", cross_channel=params.cross_channel)
     largest = solver_largest_buffer((H, W), dims)
@@ -470,7 +460,9 @@ def _demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *
         parameters["flat_lenses"] = found.as_dict(packing.grid[0] if packing is not None else None)
     elif dims == "uv":
         parameters["flat_lenses"] = {"flat_lenses": 0, "why": flat_why}
-    return DemosaicResult(
+    result = DemosaicResult(
         planes, method, parameters, max((run.iterations for run in runs), default=0), time.perf_counter() - began,
         reason, history, noise,
     )
+    return _with_safety_net(result, raw_mosaic, pattern, pitch, origin, lens_response, device) if safety_net \
+        else result

@@ -3,7 +3,7 @@
 A recipe is a flat TOML table; every key is optional and has a default (:data:`DEFAULTS`)::
 
     description = "..."           # free text
-    method = "admm-uvst"          # any of lfcl.demosaic.names.METHODS
+    method = "auto"               # any of lfcl.demosaic.names.METHODS
     strength = 1.0                # > 0, multiplies the default lambda
     lambda = 0.01                 # >= 0; absent: follows the noise level
     iterations = 20               # >= 1; absent: the method's early-stopping rule

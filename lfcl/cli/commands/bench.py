@@ -187,8 +187,9 @@ def stress_command(lenses, only, with_reference, as_json, device):
               help="The workplace's shared folder: its real light fields (antinous, Lytro 2067) join the matrix "
                    "where present.")
 @click.option("--lux", "lux_text", default="0.5,1,2,4,12,50", show_default=True, metavar="LUX,...")
-@click.option("--methods", default=f"{DEFAULT_METHOD},auto", show_default=True, metavar="METHOD,...",
-              help="Methods compared with Malvar (default: `lfcl process`'s default method and auto).")
+@click.option("--methods", default=",".join(dict.fromkeys((DEFAULT_METHOD, "auto", "admm-uvst"))), show_default=True,
+              metavar="METHOD,...", help="Methods compared with Malvar (default: `lfcl process`'s default, auto "
+                                         "and admm-uvst).")
 @click.option("--lenses", type=click.IntRange(min=4), default=48, show_default=True,
               help="Lenses per side of every capture (real light fields: a centre crop).")
 @click.option("--seed", type=click.IntRange(min=0), default=7, show_default=True,
@@ -210,3 +211,20 @@ def matrix_command(scenes, shared, lux_text, methods, lenses, seed, as_json, dev
     rows = matrix.run(scene_list, matrix.real_lightfields(shared), lux, method_list, lenses=lenses, seed=seed,
                       device=device, progress=progress)
     click.echo(json.dumps(rows, indent=2) if as_json else matrix.format_rows(rows))
+
+
+@command.command("api")
+@click.option("--size", default="4500x4500", show_default=True, metavar="HxW",
+              help="Mosaic size in pixels; 4500x4500 is the paper's full sensor.")
+@click.option("--repeats", type=click.IntRange(min=1), default=3, show_default=True, help="Timed calls (median).")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON instead of text.")
+@device_option
+@user_errors
+def api_command(size, repeats, as_json, device):
+    """The public lfcl.malvar call (copies and transfers included) against colour-demosaicing's Malvar2004."""
+    from ...bench import api
+    from ...bench.timing import parse_size
+
+    height, width = parse_size(size, "--size")
+    report = api.run(height, width, repeats=repeats, device=device)
+    click.echo(json.dumps(report, indent=2) if as_json else api.format_report(report))
