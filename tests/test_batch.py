@@ -232,3 +232,19 @@ def test_a_stale_lock_needs_resume(tmp_path):
     assert lock.took_over["pid"] == dead.pid and json.loads((tmp_path / LOCK).read_text())["pid"] == os.getpid()
     lock.release()
     assert not (tmp_path / LOCK).exists()
+
+
+def test_batch_without_dask_names_the_extra(tmp_path, monkeypatch):
+    import importlib.util
+
+    real_find_spec = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "distributed" else real_find_spec(name, *a))
+    from click.testing import CliRunner
+
+    from lfcl.cli import cli
+
+    result = CliRunner().invoke(cli, ["batch", str(tmp_path), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 1
+    assert result.output.strip() == "lfcl: error: lfcl batch runs on Dask, which is not installed: pip install 'lfcl[batch]'"
+    assert not (tmp_path / "out").exists()

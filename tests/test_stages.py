@@ -1,4 +1,4 @@
-"""lfcl.pipeline.stages / lfcl.pipeline.recipes and `lfcl process --pipeline` (docs/stages.md)."""
+"""lfcl.pipeline.stages / lfcl.pipeline.recipes and `lfcl process --recipe` (docs/stages.md)."""
 
 from __future__ import annotations
 
@@ -143,14 +143,14 @@ def test_stage_contracts(capture, tmp_path):
 
 def test_process_pipeline_preview_and_explicit_options_win(capture, tmp_path):
     out = tmp_path / "p"
-    result = CliRunner().invoke(cli, ["process", str(capture), "--pipeline", "preview", "-o", str(out), "--json"])
+    result = CliRunner().invoke(cli, ["process", str(capture), "--recipe", "preview", "-o", str(out), "--json"])
     assert result.exit_code == 0, result.output
     summary = json.loads(result.output)
     assert summary["method"] == "malvar" and summary["recipe"]["name"] == "preview"
     assert sorted(p.name for p in out.iterdir()) == ["center.exr", "center.png", "summary.json"]
 
     out2 = tmp_path / "q"
-    result = CliRunner().invoke(cli, ["process", str(capture), "--pipeline", "preview", "--method", "admm-uv",
+    result = CliRunner().invoke(cli, ["process", str(capture), "--recipe", "preview", "--method", "admm-uv",
                                       "--iterations", "2", "-o", str(out2), "--json"])
     assert result.exit_code == 0, result.output
     summary = json.loads(result.output)
@@ -158,7 +158,7 @@ def test_process_pipeline_preview_and_explicit_options_win(capture, tmp_path):
     assert summary["recipe"]["from_command_line"] == ["iterations", "method"]
     assert sorted(p.name for p in out2.iterdir()) == ["center.exr", "center.png", "summary.json"]  # from the recipe
 
-    result = CliRunner().invoke(cli, ["process", str(capture), "--pipeline", "nope", "-o", str(tmp_path / "r")])
+    result = CliRunner().invoke(cli, ["process", str(capture), "--recipe", "nope", "-o", str(tmp_path / "r")])
     assert result.exit_code != 0 and "unknown recipe 'nope'" in result.output
 
 
@@ -166,7 +166,7 @@ def test_process_pipeline_by_path(capture, tmp_path):
     path = tmp_path / "r.toml"
     path.write_text('method = "malvar"\noutputs = ["lightfield"]\n')
     out = tmp_path / "out"
-    result = CliRunner().invoke(cli, ["process", str(capture), "--pipeline", str(path), "-o", str(out), "--json"])
+    result = CliRunner().invoke(cli, ["process", str(capture), "--recipe", str(path), "-o", str(out), "--json"])
     assert result.exit_code == 0, result.output
     assert sorted(p.name for p in out.iterdir()) == ["lightfield.npy", "summary.json"]
 
@@ -174,7 +174,7 @@ def test_process_pipeline_by_path(capture, tmp_path):
 @pytest.mark.parametrize("recipe", ["lowlight", "preview"])
 def test_pipeline_equals_process(recipe, capture, tmp_path):
     summary = pipeline_from_recipe(recipe, outputs=["lightfield"], iterations=3).run(capture, tmp_path / "stages")
-    result = CliRunner().invoke(cli, ["process", str(capture), "--pipeline", recipe, "--outputs", "lightfield",
+    result = CliRunner().invoke(cli, ["process", str(capture), "--recipe", recipe, "--outputs", "lightfield",
                                       "--iterations", "3", "-o", str(tmp_path / "cli"), "--json"])
     assert result.exit_code == 0, result.output
     cli_summary = json.loads(result.output)

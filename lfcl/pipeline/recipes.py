@@ -164,7 +164,7 @@ def pipeline_from_recipe(recipe, **overrides):
                  strength=merged["strength"], device=given.get("device")),
         Outputs(merged["outputs"], refocus=merged["refocus"], fmt=merged["format"], previews=merged["previews"]),
     ], recipe=merged)
-    # every output file records the recipe and the options used (as `lfcl process --pipeline` does)
+    # every output file records the recipe and the options used (as `lfcl process --recipe` does)
     pipeline.stages[-1].metadata["recipe"] = {"name": merged["name"], "path": merged["path"],
                                               "options": pipeline.options()}
     return pipeline

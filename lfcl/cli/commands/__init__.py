@@ -33,3 +33,36 @@ device_option = click.option(
     "--device", "device", default=None, metavar="SPEC",
     help="OpenCL device: an index from `lfcl devices` or a name substring. Default: $LFCL_DEVICE, else the first device.",
 )
+
+
+class SectionedCommand(click.Command):
+    """A command whose --help lists its options in named sections (``sections``: title -> parameter names,
+    in order); options in no section come last under "Other options"."""
+
+    def __init__(self, *args, sections: dict[str, tuple[str, ...]] | None = None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.sections = sections or {}
+
+    def format_options(self, ctx, formatter):
+        records = {p.name: p.get_help_record(ctx) for p in self.get_params(ctx)}
+        placed = set()
+        for title, names in self.sections.items():
+            rows = [records[n] for n in names if records.get(n)]
+            placed.update(names)
+            if rows:
+                with formatter.section(title):
+                    formatter.write_dl(rows)
+        rest = [record for name, record in records.items() if record and name not in placed]
+        if rest:
+            with formatter.section("Other options"):
+                formatter.write_dl(rest)
+
+
+#: The sections of `lfcl process --help` and `lfcl batch --help` (their options are shared).
+PROCESS_SECTIONS = {
+    "Input and lens grid": ("pitch", "calibration", "white", "pattern"),
+    "Method": ("method", "pipeline", "strength", "lam", "iterations", "tolerance_db", "start", "safety_net",
+               "max_memory"),
+    "Outputs": ("out_dir", "outputs", "refocus_spec", "fmt", "previews", "as_json"),
+    "Device": ("device",),
+}

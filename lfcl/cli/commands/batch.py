@@ -17,7 +17,7 @@ from pathlib import Path
 
 import click
 
-from . import user_errors
+from . import PROCESS_SECTIONS, SectionedCommand, user_errors
 from .process import DEFAULT_PITCH, process_options, settings_from_options
 
 SUMMARY = "lfcl-batch-summary.json"
@@ -76,6 +76,14 @@ def _run(cluster, jobs: list, as_json: bool) -> list:
     return sorted(results, key=lambda r: order[r["name"]])
 
 
+def _need_dask():
+    """A one-line error naming the extra when Dask is not installed (it serves `lfcl batch` alone)."""
+    import importlib.util
+
+    if importlib.util.find_spec("distributed") is None:
+        raise ValueError("lfcl batch runs on Dask, which is not installed: pip install 'lfcl[batch]'")
+
+
 def _count(n: int, noun: str) -> str:
     return f"{n} {noun}{'' if n == 1 else 's'}"
 
@@ -97,7 +105,7 @@ def summary_text(summary: dict) -> str:
     return "\n".join(lines)
 
 
-@click.command("batch")
+@click.command("batch", cls=SectionedCommand, sections={**PROCESS_SECTIONS, "Batch": ("inputs", "scheduler", "workers", "resume")})
 @click.argument("inputs", nargs=-1, required=True)
 @click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output folder: one folder per capture, named after it (created if missing).")
@@ -113,6 +121,7 @@ def summary_text(summary: dict) -> str:
 @user_errors
 def command(inputs, out_dir, scheduler, workers, resume, as_json, **options):
     """Process many lenslet raws (files, folders, globs) like `lfcl process`, on Dask; resumable."""
+    _need_dask()
     from ...batch.inputs import capture_names, expand_inputs
     from ...batch.record import BatchLock, digest, remove_leftovers, settings_identity
 

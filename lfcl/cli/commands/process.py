@@ -1,7 +1,7 @@
 """`lfcl process`: a lenslet raw in, a demosaiced 4D light field and images out (docs/outputs.md).
 
 The options (:func:`process_options`, shared with `lfcl batch`) become a
-:class:`ProcessSettings` (:func:`settings_from_options`: the ``--pipeline`` recipe
+:class:`ProcessSettings` (:func:`settings_from_options`: the ``--recipe``
 fills the options not given, and every option a user can get wrong is checked
 before any work), which builds a :class:`lfcl.pipeline.stages.Pipeline` (Decode, Grid,
 Demosaic, Outputs) and runs it (:func:`run_capture`): the outputs asked for, each
@@ -19,7 +19,7 @@ from pathlib import Path
 import click
 
 from ...demosaic.names import DEFAULT_METHOD, FLAT_P, METHODS, STARTS
-from . import device_option, user_errors
+from . import PROCESS_SECTIONS, SectionedCommand, device_option, user_errors
 
 DEFAULT_OUTPUTS = "center,mean,lightfield"
 DEFAULT_REFOCUS = "-1:1:0.25"
@@ -28,7 +28,7 @@ DEFAULT_PITCH = 9
 #: The output kinds (lfcl.outputs.files.KINDS, repeated here so that `lfcl --help` does not import numpy).
 OUTPUTS = ("center", "mean", "views", "views-each", "refocus", "lightfield", "depth")
 
-#: Options a ``--pipeline`` recipe supplies when not given (parameter name -> recipe key).
+#: Options a ``--recipe`` supplies when not given (parameter name -> recipe key).
 RECIPE_KEYS = {"method": "method", "strength": "strength", "lam": "lambda", "iterations": "iterations",
                "outputs": "outputs", "refocus_spec": "refocus", "fmt": "format", "previews": "previews"}
 
@@ -74,20 +74,20 @@ _OPTIONS = (
                       "lens; gains on the mean image) or guarded (linear4d, with Malvar in the lenses where it "
                       "breaks: high-contrast edges, clipped highlights), docs/auto.md. Default: malvar; with "
                       "--method auto, the start its rule names."),
-    click.option("--skip-flat/--solve-flat", "skip_flat", default=None,
+    click.option("--skip-flat/--solve-flat", "skip_flat", default=None, hidden=True,  # measured: off by default
                  help="Flat lenses (constant per colour within the noise: a chi-square test against the raw's "
                       "noise model) get their colour means and leave the ADMM solve (admm-uv, admm-uv-xc, auto's "
                       "picks; docs/auto.md). Default: solve every lens (the test took fine texture for noise)."),
     click.option("--safety-net/--no-safety-net", "safety_net", default=True, show_default=True,
                  help="Keep every lens's colour means within the noise of Malvar's (lfcl/demosaic/safety_net.py; "
                       "docs/auto.md): never a mean image worse than Malvar's."),
-    click.option("--flat-p", "flat_p", default=None, type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
+    click.option("--flat-p", "flat_p", default=None, hidden=True, type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
                  metavar="P",
                  help=f"A lens is flat when its chi-square p-value is above P (default {FLAT_P:g}); implies --skip-flat."),
     click.option("--max-memory", default=None, type=click.FloatRange(min=0.01), metavar="GIB",
                  help="Device memory the solver may use, GiB; default 80% of the device's. A larger admm-uv "
                       "problem runs in bands of lens rows (exact: the (u, v) prior couples no two lenses)."),
-    click.option("--pipeline", "--recipe", "pipeline", default=None, metavar="NAME|PATH",
+    click.option("--recipe", "pipeline", default=None, metavar="NAME|PATH",
                  help="A recipe (default, lowlight, preview, or a .toml file; docs/stages.md) supplying defaults "
                       "for --method, --strength, --lambda, --iterations, --outputs, --refocus, --format, "
                       "--previews; options given on the command line win."),
@@ -114,7 +114,7 @@ class ProcessSettings:
     ``refocus``: the slopes spec (None when refocus is not among the outputs);
     ``max_memory``: bytes or None; ``tolerance_db``: the ADMM stop in dB or None (the
     method's rule); ``start``: the ADMM methods' first estimate or None (the method's); ``recipe``: what the outputs record about a
-    ``--pipeline`` recipe (name, path, options, from_command_line) or None.
+    ``--recipe`` (name, path, options, from_command_line) or None.
     """
 
     method: str = DEFAULT_METHOD
@@ -317,7 +317,7 @@ class IterationBar:
             self.bar.close()
 
 
-@click.command("process")
+@click.command("process", cls=SectionedCommand, sections=PROCESS_SECTIONS)
 @click.argument("raw", type=click.Path(path_type=Path, readable=False))
 @click.option("-o", "--output", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Output folder (created if missing).")
