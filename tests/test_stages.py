@@ -199,3 +199,15 @@ def test_demosaic_refuses_an_unknown_grid_kind_and_finish_edits_the_summary(capt
     summary = pipeline.run(capture, tmp_path / "out", finish=finish)
     assert summary["note"] == "edited" and json.loads((tmp_path / "out" / "summary.json").read_text()) == summary
     assert summary["outputs"] == ["center.exr"] and summary["options"]["max_memory"] is None
+
+
+def test_a_recipe_run_judges_auto_on_its_outputs_as_process_does(capture, tmp_path):
+    summary = pipeline_from_recipe("default", outputs=["center"]).run(capture, tmp_path / "stages")
+    result = CliRunner().invoke(cli, ["process", str(capture), "--recipe", "default", "--outputs", "center",
+                                      "-o", str(tmp_path / "cli"), "--json"])
+    assert result.exit_code == 0, result.output
+    cli_summary = json.loads(result.output)
+    assert summary["method"] == cli_summary["method"] == "auto"
+    assert summary["options"]["auto_view"] == cli_summary["options"]["auto_view"] == "center"
+    assert summary["parameters"]["auto"]["view"] == cli_summary["parameters"]["auto"]["view"] == "center"
+    assert (tmp_path / "stages" / "center.exr").is_file()

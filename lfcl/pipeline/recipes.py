@@ -142,6 +142,7 @@ def pipeline_from_recipe(recipe, **overrides):
     the stages' other options: ``pattern``, ``pitch``, ``calibration``, ``white``, ``device``.
     Recipe keys are validated like the file's; ``None`` leaves the recipe's value.
     """
+    from ..demosaic.auto import view_for_outputs
     from .stages import Decode, Demosaic, Grid, Outputs, Pipeline
 
     if not isinstance(recipe, dict):
@@ -161,7 +162,8 @@ def pipeline_from_recipe(recipe, **overrides):
         Grid(pitch=given.get("pitch"), calibration=given.get("calibration"), white=given.get("white"),
              pattern=given.get("pattern")),
         Demosaic(merged["method"], lam=merged["lambda"], iterations=merged["iterations"],
-                 strength=merged["strength"], device=given.get("device")),
+                 strength=merged["strength"], device=given.get("device"),
+                 auto_view=view_for_outputs(merged["outputs"])),  # as `lfcl process`: auto judged on the outputs
         Outputs(merged["outputs"], refocus=merged["refocus"], fmt=merged["format"], previews=merged["previews"]),
     ], recipe=merged)
     # every output file records the recipe and the options used (as `lfcl process --recipe` does)
