@@ -9,8 +9,15 @@ import numpy as np
 import pytest
 from conftest import relative_dot_error
 
-from lfcl.ops.epi import (EpiGradient, epi_adjoint_np, epi_diagonal_np, epi_gradient_np, epi_gram_np, epi_matrix_np,
-                          keys_weights_np)
+from lfcl.ops.epi import (
+    EpiGradient,
+    epi_adjoint_np,
+    epi_diagonal_np,
+    epi_gradient_np,
+    epi_gram_np,
+    epi_matrix_np,
+    keys_weights_np,
+)
 from lfcl.ops.gradient import gradient_np
 
 # (channels, S, T, U, V): odd and even pitches, a single lens row, sizes that fit no work-group size.
@@ -277,7 +284,7 @@ def test_solver_refuses_what_it_cannot_do(runtime, rng):
 
 
 def test_method_admm_epi_runs_and_records_the_disparity(runtime, rng):
-    """lfcl.methods: admm-epi estimates the disparity from the raw (lfcl.depth), solves, and says what it used."""
+    """lfcl.demosaic.methods: admm-epi estimates the disparity from the raw (lfcl.depth), solves, and says what it used."""
     from lfcl.demosaic.methods import demosaic_lightfield
     from lfcl.noise.model import NoiseEstimate
     from lfcl.solvers.epi import epi_setting
@@ -292,10 +299,16 @@ def test_method_admm_epi_runs_and_records_the_disparity(runtime, rng):
     assert result.parameters["lam_fb"] == pytest.approx(setting.fb_per_lam * setting.lam_per_sigma * 0.01)
     assert result.parameters["start"] == setting.start
     assert result.parameters["disparity"]["median"] == pytest.approx(0.5, abs=0.1)
-    assert result.iterations == setting.iterations
+    assert 2 <= result.iterations <= setting.iterations
+    assert result.parameters["change_tol"] == pytest.approx(setting.change_per_sigma * 0.01)
+    assert result.parameters["max_iter"] == setting.iterations
     explicit = demosaic_lightfield(b, "GRBG", (U, V), "admm-epi", noise=noise, lam=0.002, iterations=3,
                                    start="malvar", safety_net=False)
     assert explicit.iterations == 3 and explicit.parameters["lam"] == pytest.approx(0.002)
+    assert explicit.parameters["change_tol"] == 0
+    dark = NoiseEstimate(gain=0.0, floor=4e-6, sigma=0.002, source="test")  # low light: the guarded start
+    low = demosaic_lightfield(b, "GRBG", (U, V), "admm-epi", noise=dark, safety_net=False)
+    assert epi_setting(0.002).start == low.parameters["start"] == "guarded" and "start_guard" in low.parameters
     assert explicit.parameters["lam_fb"] == pytest.approx(setting.fb_per_lam * 0.002)
     malvar = demosaic_lightfield(b, "GRBG", (U, V), "malvar")
     inner = (slice(None), slice(2 * U, (S - 2) * U), slice(2 * V, (T - 2) * V))
@@ -306,11 +319,14 @@ def test_epi_setting_follows_the_noise_in_log_sigma():
     """Between two rows lam / sigma, lam_fb / lam and the iterations are linear in log sigma; outside, the end rows."""
     from lfcl.solvers.epi import EpiSetting, epi_setting
 
-    rows = (EpiSetting(sigma=1e-2, lam_per_sigma=0.4, fb_per_lam=2.0, iterations=18, start="linear4d"),
-            EpiSetting(sigma=1e-3, lam_per_sigma=0.2, fb_per_lam=1.0, iterations=10, start="malvar"))
+    rows = (EpiSetting(sigma=1e-2, lam_per_sigma=0.4, fb_per_lam=2.0, change_per_sigma=0.2, iterations=18,
+                       start="linear4d"),
+            EpiSetting(sigma=1e-3, lam_per_sigma=0.2, fb_per_lam=1.0, change_per_sigma=0.0, iterations=10,
+                       start="malvar"))
     quarter = 1e-3 * 10 ** 0.25  # a quarter of the way from 1e-3 to 1e-2 in log sigma
     got = epi_setting(quarter, rows)
     assert got.lam_per_sigma == pytest.approx(0.25) and got.fb_per_lam == pytest.approx(1.25)
+    assert got.change_per_sigma == pytest.approx(0.05)
     assert got.iterations == 12 and got.start == "malvar" and got.sigma == pytest.approx(quarter)
     assert epi_setting(1e-3 * 10 ** 0.75, rows).start == "linear4d"
     low, high = epi_setting(1e-5, rows), epi_setting(0.5, rows)
@@ -319,3 +335,42 @@ def test_epi_setting_follows_the_noise_in_log_sigma():
     for bad in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(ValueError, match="sigma"):
             epi_setting(bad, rows)
+
+
+def test_change_rule_stops_device_and_reference_at_the_same_iteration(runtime, rng):
+    """admm-epi's default stop (rms change <= change_tol): the device stops where the float64 twin does."""
+    import dataclasses
+
+    from lfcl.solvers.epi import EpiAdmmSolver, EpiPrior, admm_epi_reference
+    from lfcl.solvers.params import AdmmParams
+
+    S, T, U, V = 5, 4, 9, 9
+    b, x0, _ = plane_scene_mosaic(rng, S, T, U, V)
+    disparity, confidence = maps(rng, S, T, spread=1.0)
+    prior = EpiPrior(disparity, confidence, lam_fb=0.01)
+    params = AdmmParams(lam=0.01, rho=1.0, max_iter=25, cg_steps=4, cg_tol=0.0)
+    changes = [r.rms_change for r in admm_epi_reference(b, "GRBG", (U, V), params, x0, prior).history]
+    # a tolerance between the change of the 5th (or a later) iteration and every earlier one's, 5 % from both
+    k = next(i for i in range(4, len(changes)) if changes[i] < 0.9 * min(changes[1:i]))
+    params = dataclasses.replace(params, change_tol=math.sqrt(changes[k] * min(changes[1:k])))
+    expected = admm_epi_reference(b, "GRBG", (U, V), params, x0, prior)
+    got = EpiAdmmSolver(runtime, b.shape, "GRBG", (U, V)).solve(runtime.to_device(b), runtime.to_device(x0), params,
+                                                                prior)
+    assert expected.iterations == got.iterations == k + 1 < 25
+    assert "rms change" in got.stop_reason
+    assert np.linalg.norm(got.x.get() - expected.x) / np.linalg.norm(expected.x) <= 1e-4
+
+
+def test_epi_start_needs_linear4d_coefficients_for_the_pitch():
+    """In low light the schedule starts from the guarded start, which needs linear4d: on another pitch, Malvar,
+    said in the reason."""
+    from lfcl.ops.linear4d import load_model
+    from lfcl.solvers.epi import epi_setting, epi_start
+
+    fitted = tuple(load_model().pitch)
+    other = (fitted[0] - 2, fitted[1] - 2)
+    assert epi_setting(0.002).start == "guarded" and epi_setting(0.02).start == "malvar"
+    assert epi_start(0.002, fitted) == ("guarded", None)
+    start, why = epi_start(0.002, other)
+    assert start == "malvar" and f"not {other[0]}x{other[1]}" in why
+    assert epi_start(0.02, other) == ("malvar", None)

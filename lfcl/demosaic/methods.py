@@ -310,11 +310,14 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         return _with_safety_net(result, raw_mosaic, pattern, pitch, origin, lens_response, device) if safety_net \
             else result
     b = runtime.to_device(mosaic)
-    if method == "admm-epi" and start is None:  # its start follows the noise (lfcl/solvers/epi.py EPI_SCHEDULE)
-        from ..solvers.epi import epi_setting
+    epi_start_replaced = None
+    # admm-epi's start follows the noise (lfcl/solvers/epi.py EPI_SCHEDULE), unless lam and iterations are given
+    # and there is no noise model: then nothing is estimated and it starts from Malvar
+    if method == "admm-epi" and start is None and (noise is not None or lam is None or iterations is None):
+        from ..solvers.epi import epi_start
 
         noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
-        start = epi_setting(max(noise.sigma, 1e-6)).start
+        start, epi_start_replaced = epi_start(noise.sigma, pitch)
     start = "malvar" if method == "malvar" else start or "malvar"
     guard = None
     if start in ("linear4d", "guarded"):
@@ -338,7 +341,7 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         _check_finite(np.array([np.inf]), f"the {start} start", mosaic)
     defaults = ADMM_DEFAULTS[method]
     needs_sigma = lam is None or tolerance_db is not None or (iterations is None and defaults.change_per_sigma > 0) \
-        or defaults.dims == "epi"  # its iterations and lam_fb follow the noise (lfcl/solvers/epi.py)
+        or (defaults.dims == "epi" and iterations is None)  # its stop follows the noise (lfcl/solvers/epi.py)
     if noise is None and needs_sigma:
         noise = estimate_noise(raw_mosaic, pattern, pitch, origin)  # the noise of the raw, as lambda expects
     sigma = noise.sigma if noise is not None else 0.0  # unused when lam and iterations are given
@@ -369,13 +372,15 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     if dims == "epi":  # the prior along the epipolar lines, with the disparity from the raw (lfcl/solvers/epi.py)
         from ..solvers.epi import demosaic_epi, epi_params
 
-        if tolerance_db is None:  # lam, lam_fb and the iterations follow the noise (EPI_SCHEDULE)
+        if tolerance_db is None and noise is not None:  # lam, lam_fb and the stop follow the noise (EPI_SCHEDULE)
             params, lam_fb = epi_params(params, sigma, lam=lam, iterations=iterations, strength=strength)
         else:
             lam_fb = params.lam * defaults.fb_per_sigma / defaults.lam_per_sigma
         planes, extra, run = demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params, lam_fb, noise,
                                           device, lens_weights, callback, max_memory)
         parameters = {**dataclasses.asdict(params), "start": start, **extra}
+        if epi_start_replaced is not None:
+            parameters["start_replaced"] = epi_start_replaced
         if guard is not None:
             parameters["start_guard"] = guard
         result = DemosaicResult(planes, method, parameters, run.iterations, time.perf_counter() - began,

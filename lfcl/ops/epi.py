@@ -22,11 +22,11 @@ point, so it is the lens whose depth they share (the prototype measured +0.03 dB
 is exactly the (u, v) forward differences of lfcl/ops/gradient.py.
 
 The index arithmetic (which lenses a ray reads, which taps) is done in float32 with every operation
-rounded on its own, here and in kernels/epi.cl, so that the twin and the device pick the same lenses;
+rounded on its own, here and in lfcl/kernels/epi.cl, so that the twin and the device pick the same lenses;
 the weights and values are in the twin's dtype (float64 capable).
 
 The numpy twin builds the operator as a sparse matrix (one per sensor geometry and maps, shared by the
-channels). The device computes the forward and the adjoint as gathers (kernels/epi.cl) from the
+channels). The device computes the forward and the adjoint as gathers (lfcl/kernels/epi.cl) from the
 per-sample (d_i, w_i) that the host reads from the maps once (:func:`ray_maps_np`), on runs of 16
 columns with vector loads only, looping over the lens offsets the taps reach, tabulated once per map
 (:func:`offset_table_np`); the adjoint's target gathers from the sources whose taps land on it: no
@@ -91,7 +91,7 @@ def keys_weights_np(f: np.ndarray) -> np.ndarray:
 
 def ray_maps_np(disparity, confidence, pitch) -> tuple[np.ndarray, np.ndarray]:
     """(d_i, w_i) of every sample as float32 [S, U, T, V]: the maps read at the lens the ray sees
-    in the centre view (float32 index arithmetic, as kernels/epi.cl ray_disparity)."""
+    in the centre view (float32 index arithmetic, as lfcl/kernels/epi.cl ray_disparity)."""
     U, V = pitch
     S, T = disparity.shape
     f32 = np.float32

@@ -79,26 +79,32 @@ class EpiSetting:
     sigma: float  # the training captures' noise level (rms per raw pixel, normalised units)
     lam_per_sigma: float  # lam = lam_per_sigma * sigma
     fb_per_lam: float  # lam_fb = fb_per_lam * lam
-    iterations: int
-    start: str  # the first estimate (lfcl.methods.demosaic_lightfield's ``start``)
+    change_per_sigma: float  # stop once rms(x_k - x_{k-1}) <= change_per_sigma * sigma (0: never)
+    iterations: int  # at most
+    start: str  # the first estimate (lfcl.demosaic.methods.demosaic_lightfield's ``start``)
 
 
 #: admm-epi's defaults by noise level, fitted by research/fit_epi.py on training seeds (docs/admm.md,
-#: "admm-epi"); rows by increasing sigma. Between rows :func:`epi_setting` interpolates lam_per_sigma,
-#: fb_per_lam and the iterations in log sigma and takes the start of the nearer row; outside, the end row's.
-EPI_SCHEDULE = (
-    EpiSetting(sigma=1e-3, lam_per_sigma=0.3, fb_per_lam=1.0, iterations=20, start="malvar"),
+#: "admm-epi"). Between rows :func:`epi_setting` interpolates lam_per_sigma, fb_per_lam, change_per_sigma and
+#: the iterations in log sigma and takes the start of the nearer row; outside, the end row's.
+EPI_SCHEDULE = (  # the median sigma of the training captures at 0.5, 2, 12 and 50 lux
+    EpiSetting(sigma=1.25e-3, lam_per_sigma=0.2, fb_per_lam=0.3, change_per_sigma=0.1, iterations=20, start="guarded"),
+    EpiSetting(sigma=2.6e-3, lam_per_sigma=0.1, fb_per_lam=1.0, change_per_sigma=0.05, iterations=20, start="guarded"),
+    EpiSetting(sigma=1.0e-2, lam_per_sigma=0.1, fb_per_lam=1.0, change_per_sigma=0.05, iterations=20, start="malvar"),
+    EpiSetting(sigma=3.5e-2, lam_per_sigma=0.1, fb_per_lam=1.0, change_per_sigma=0.05, iterations=20, start="malvar"),
 )
 
-#: lfcl.depth.estimate_disparity's options for admm-epi (its own defaults otherwise; docs/admm.md, "admm-epi").
-EPI_DEPTH_OPTIONS: dict = {}
+#: lfcl.depth.estimate_disparity's options for admm-epi (its own defaults otherwise): without the half-aperture
+#: occlusion curves the disparity costs a third of the time and admm-epi's centre view moved by -0.16..+0.08 dB
+#: on the training captures (docs/admm.md, "admm-epi").
+EPI_DEPTH_OPTIONS: dict = {"occlusion": False}
 
 
-def epi_setting(sigma: float, schedule=EPI_SCHEDULE) -> EpiSetting:
-    """admm-epi's parameters at noise level ``sigma`` (:data:`EPI_SCHEDULE`)."""
+def epi_setting(sigma: float, schedule=None) -> EpiSetting:
+    """admm-epi's parameters at noise level ``sigma`` (``schedule``'s rows; None: :data:`EPI_SCHEDULE`)."""
     if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma > 0):
         raise ValueError(f"sigma must be a finite number > 0, got {sigma!r}")
-    rows = sorted(schedule, key=lambda r: r.sigma)
+    rows = sorted(EPI_SCHEDULE if schedule is None else schedule, key=lambda r: r.sigma)
     if not rows:
         raise ValueError("the schedule is empty")
     if sigma <= rows[0].sigma:
@@ -110,19 +116,39 @@ def epi_setting(sigma: float, schedule=EPI_SCHEDULE) -> EpiSetting:
     t = (math.log(sigma) - math.log(a.sigma)) / (math.log(b.sigma) - math.log(a.sigma))
     return EpiSetting(sigma=float(sigma), lam_per_sigma=(1 - t) * a.lam_per_sigma + t * b.lam_per_sigma,
                       fb_per_lam=(1 - t) * a.fb_per_lam + t * b.fb_per_lam,
-                      iterations=int(round((1 - t) * a.iterations + t * b.iterations)),
+                      change_per_sigma=(1 - t) * a.change_per_sigma + t * b.change_per_sigma,
+                      iterations=round((1 - t) * a.iterations + t * b.iterations),
                       start=a.start if t < 0.5 else b.start)
+
+
+def epi_start(sigma: float, pitch) -> tuple[str, str | None]:
+    """The schedule's start at ``sigma`` for lenses of ``pitch``, and why it was replaced (None: it was not).
+
+    linear4d (and so the guarded start) has coefficients for one pitch only; elsewhere the start is Malvar's,
+    and the reason goes into the parameters (lfcl.demosaic.methods), as auto does (lfcl.demosaic.auto.for_pitch)."""
+    start = epi_setting(max(float(sigma), 1e-6)).start
+    if start not in ("linear4d", "guarded"):
+        return start, None
+    from ..ops.linear4d import load_model
+
+    fitted, pitch = tuple(load_model().pitch), tuple(int(p) for p in pitch)
+    if pitch == fitted:
+        return start, None
+    return "malvar", (f"the schedule's {start} start needs linear4d, which has coefficients for "
+                      f"{fitted[0]}x{fitted[1]} lenses only, not {pitch[0]}x{pitch[1]}: Malvar's instead")
 
 
 def epi_params(params: AdmmParams, sigma: float, *, lam=None, iterations=None, strength: float = 1.0
                ) -> tuple[AdmmParams, float]:
-    """``params`` (lfcl.methods.admm_params's for admm-epi) with lam and the iteration count of
-    :func:`epi_setting` at ``sigma`` where they were not given explicitly, and lam_fb."""
-    setting = epi_setting(max(float(sigma), 1e-6))
+    """``params`` (lfcl.demosaic.methods.admm_params's for admm-epi) with lam and the stop (change rule and most
+    iterations) of :func:`epi_setting` at ``sigma`` where they were not given explicitly, and lam_fb.
+    An explicit ``iterations`` runs that many (no change rule), as for the other methods."""
+    sigma = max(float(sigma), 1e-6)
+    setting = epi_setting(sigma)
     if lam is None:
-        params = dataclasses.replace(params, lam=strength * setting.lam_per_sigma * max(float(sigma), 1e-6))
-    if iterations is None and params.change_tol == 0:
-        params = dataclasses.replace(params, max_iter=setting.iterations)
+        params = dataclasses.replace(params, lam=strength * setting.lam_per_sigma * sigma)
+    if iterations is None:
+        params = dataclasses.replace(params, max_iter=setting.iterations, change_tol=setting.change_per_sigma * sigma)
     return params, setting.fb_per_lam * params.lam
 
 
@@ -340,7 +366,7 @@ def admm_epi_reference(b, pattern, pitch, params: AdmmParams, x0, prior: EpiPrio
 def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: AdmmParams, lam_fb: float, noise,
                  device=None, lens_weights=None, callback=None, max_memory: int | None = None,
                  depth_options: dict | None = None) -> tuple[np.ndarray, dict, AdmmResult]:
-    """``admm-epi`` of lfcl.methods.demosaic_lightfield: estimate the disparity from the raw
+    """``admm-epi`` of lfcl.demosaic.methods.demosaic_lightfield: estimate the disparity from the raw
     (lfcl.depth.estimate_disparity), then solve from the start ``x0`` (device arrays ``b``, ``x0``).
 
     Returns the planes [3, H, W] on the host, the parameters to record (the disparity's
@@ -353,7 +379,7 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     H, W = b.shape
     began = time.perf_counter()
     depth = estimate_disparity(raw_mosaic, pattern, pitch, origin=origin, noise=noise, device=device,
-                               **(depth_options or {}))
+                               **(EPI_DEPTH_OPTIONS if depth_options is None else depth_options))
     depth_seconds = time.perf_counter() - began
     prior = EpiPrior(depth.disparity, depth.confidence, lam_fb=float(lam_fb))
     lenses = (H // int(pitch[0]), W // int(pitch[1]))
@@ -377,6 +403,7 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
             "mean": float(d.mean()), "median": float(np.median(d)), "std": float(d.std()),
             "confidence_mean": float(w.mean()), "confident_share": float(np.mean(w >= 0.5)),
             "search_range": [-depth.dmax, depth.dmax], "step": depth.step, "seconds": depth_seconds,
+            "options": dict(EPI_DEPTH_OPTIONS if depth_options is None else depth_options),
             "lookup": "d and confidence read at the lens the ray sees in the centre view",
         },
     }
