@@ -385,7 +385,7 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     lenses = (H // int(pitch[0]), W // int(pitch[1]))
     budget = int(max_memory) if max_memory is not None else int(0.8 * runtime.device.global_mem_size)
     needed = epi_solver_bytes((H, W), prior.has_fallback(lenses))
-    if needed > budget or 4 * 6 * H * W > runtime.device.max_mem_alloc_size:
+    if needed > budget or runtime.device.max_mem_alloc_size < 4 * 6 * H * W:
         raise ValueError(f"admm-epi on a {H}x{W} sensor needs about {needed / 2**30:.1f} GiB of device memory but "
                          f"{runtime.name} allows {budget / 2**30:.1f} GiB; its prior couples neighbouring lenses, "
                          "so it does not run in bands: use admm-uv, a crop, or a larger device")
