@@ -178,6 +178,9 @@ class CostVolume:
         check_device_array(mosaic, self.sensor_shape, "mosaic")
         out = output(self.runtime, out, self.shape)
         gain, floor = (float(n) for n in noise)
+        if not all(np.isfinite(v) and abs(v) < 3.0e38 for v in (gain, floor)):  # float32 would make them Inf
+            raise ValueError(f"depth: the noise model (gain {gain:.3g}, floor {floor:.3g}) lies beyond float32: "
+                             "a normalised raw should lie near [0, 1]")
         sat = np.float32(min(float(saturation), 3.0e38))
         u_lo, u_hi, v_lo, v_hi = _views(views, self.U, self.V)
         self.runtime.launch(

@@ -53,7 +53,8 @@ def command(capture_dir, methods, out_dir, sweep_lux, gradients, as_json, device
     out_dir = out_dir or capture_dir / "eval"
     label = f"{capture.meta['scene'].get('name', 'scene')} at {capture.meta['lux']:g} lux"
 
-    results = [ev.run_method(capture, m, device) for m in tqdm(method_list, desc="methods", disable=as_json)]
+    bar_off = True if as_json else None  # None: a bar on terminals only, none in logs and pipes
+    results = [ev.run_method(capture, m, device) for m in tqdm(method_list, desc="methods", disable=bar_off)]
     report = {"capture": str(capture_dir), "scene": capture.meta["scene"], "lux": capture.meta["lux"],
               "lenses": capture.meta["lenses"],
               "results": [{k: v for k, v in r.items() if k != "lightfield"} for r in results]}
@@ -71,7 +72,7 @@ def command(capture_dir, methods, out_dir, sweep_lux, gradients, as_json, device
 
     if lux_list:
         sweep = []
-        for lux in tqdm(lux_list, desc="lux sweep", disable=as_json):
+        for lux in tqdm(lux_list, desc="lux sweep", disable=bar_off):
             swept = ev.capture_in_memory(capture.meta, lux)
             rows = [ev.run_method(swept, m, device) for m in method_list]
             sweep.append({"lux": lux, "results": [{k: v for k, v in r.items() if k != "lightfield"} for r in rows]})
