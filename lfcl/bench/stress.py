@@ -84,6 +84,11 @@ MEAN_SLACK = 0.10  # plausibility: channel means within 10 % of the largest Malv
 PEAK_FACTOR = 2.0  # plausibility: max |x| at most twice Malvar's
 FLAT_TOLERANCE = 1e-5
 FLOAT32_EPS = float(np.finfo(np.float32).eps)  # 2^-23
+#: The depth output (lfcl.depth.estimate_disparity) runs as a row of its own on the cases of these groups;
+#: on a flat input its confidence must say "unknown" (below DEPTH_UNKNOWN everywhere).
+DEPTH = "depth"
+DEPTH_GROUPS = ("images", "input", "shape", "raw", "noise")
+DEPTH_UNKNOWN = 0.5
 
 
 @dataclasses.dataclass
@@ -330,10 +335,27 @@ def _json_value(value):
     return value if not isinstance(value, float) or math.isfinite(value) else str(value)
 
 
+@dataclasses.dataclass
+class _DepthResult:
+    """estimate_disparity's maps in the shape of a demosaic result, for the suite's checks."""
+
+    planes: np.ndarray  # [2, S, T]: disparity, confidence
+    history: list
+    iterations: int = 0
+    stop_reason: str = "direct"
+
+
 def _attempt(case: Case, method: str, device):
     start = time.perf_counter()
     try:
-        result = demosaic_lightfield(case.mosaic, case.pattern, case.pitch, method, device=device, **case.kwargs)
+        if method == DEPTH:
+            from ..depth import estimate_disparity
+
+            depth = estimate_disparity(case.mosaic, case.pattern, case.pitch, device=device,
+                                       noise=case.kwargs.get("noise"))
+            result = _DepthResult(np.stack([depth.disparity, depth.confidence]), [])
+        else:
+            result = demosaic_lightfield(case.mosaic, case.pattern, case.pitch, method, device=device, **case.kwargs)
     except Exception as exc:
         return None, exc, time.perf_counter() - start
     return result, None, time.perf_counter() - start
@@ -361,7 +383,13 @@ def run_case(case: Case, method: str, device=None, repeat: bool = True) -> dict:
         planes = result.planes
         row.update(iterations=result.iterations, stop_reason=result.stop_reason, max_abs=_max_abs(planes),
                    finite=bool(np.isfinite(planes).all()), history_finite=_history_finite(result.history))
-        if row["finite"]:
+        if row["finite"] and method == DEPTH:
+            confidence = planes[1]
+            if confidence.min() < 0 or confidence.max() > 1:
+                row["check"] = f"a depth confidence outside [0, 1] ({confidence.min():.3g}..{confidence.max():.3g})"
+            elif case.flat is not None and confidence.max() >= DEPTH_UNKNOWN:
+                row["check"] = f"a flat input's depth confidence reached {confidence.max():.3g} (should say unknown)"
+        elif row["finite"]:
             if case.flat is not None:
                 off = float(np.abs(planes.astype(np.float64) - case.flat).max())
                 if off > FLAT_TOLERANCE:
@@ -410,7 +438,7 @@ def run(lenses=(8, 8), device=None, groups=None, only=None, repeat: bool = True,
         _attempt(warm, method, device)
     rows = []
     for case in cases:
-        for method in case.methods:
+        for method in case.methods + ((DEPTH,) if case.group in DEPTH_GROUPS else ()):
             if progress:
                 progress(f"{case.name} / {method}")
             rows.append(run_case(case, method, device, repeat=repeat))
