@@ -424,7 +424,7 @@ def test_bench_stress_cli_exits_1_when_a_row_breaks_the_contract(monkeypatch):
 @pytest.mark.parametrize("group", stress.DEPTH_GROUPS)
 def test_the_depth_output_keeps_the_contract_on_every_input_of_its_groups(group):
     # finite maps or a clear error, a confidence in [0, 1] that says "unknown" on flat inputs, the same bytes twice
-    cases = [c for c in stress.build_cases(LENSES, groups=[group])]
+    cases = stress.build_cases(LENSES, groups=[group])
     assert cases
     for c in cases:
         row = stress.run_case(c, stress.DEPTH)

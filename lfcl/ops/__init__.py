@@ -34,3 +34,14 @@ def output(runtime, out, shape, name: str = "out"):
         return runtime.empty(shape)
     check_device_array(out, shape, name)
     return out
+
+
+def lens_weights_or_ones(lens_weights, pitch) -> np.ndarray:
+    """The data-term weights [U, V] float32 of every lens (None: ones); ``ValueError`` unless finite, >= 0, U x V."""
+    U, V = (int(p) for p in pitch)
+    if lens_weights is None:
+        return np.ones((U, V), np.float32)
+    weights = np.asarray(lens_weights, dtype=np.float32)
+    if weights.shape != (U, V) or not np.all(np.isfinite(weights)) or np.any(weights < 0):
+        raise ValueError(f"lens weights must be a finite, non-negative {U}x{V} array, got shape {weights.shape}")
+    return weights

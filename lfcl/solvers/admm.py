@@ -51,7 +51,7 @@ import scipy.ndimage
 
 from ..device import grid_defines
 from ..layout import channel_map, dims_mask, ordered_dims, packed_pattern
-from ..ops import check_device_array
+from ..ops import check_device_array, lens_weights_or_ones
 from ..ops.cfa import CfaSampling
 from ..ops.crosschannel import COLOUR_GRAM, CrossGradient
 from ..ops.gradient import Gradient, gradient_gram_np
@@ -378,13 +378,7 @@ class AdmmSolver:
         For an aligned grid the white image's response repeats from lens to lens;
         a weight of 0 leaves that pixel out of the data term (a dark, vignetted corner).
         """
-        if lens_weights is None:
-            weights = np.ones((self.U, self.V), np.float32)
-        else:
-            weights = np.asarray(lens_weights, dtype=np.float32)
-            if weights.shape != (self.U, self.V) or not np.all(np.isfinite(weights)) or np.any(weights < 0):
-                raise ValueError(f"lens weights must be a finite, non-negative {self.U}x{self.V} array, "
-                                 f"got shape {weights.shape}")
+        weights = lens_weights_or_ones(lens_weights, (self.U, self.V))
         key = tuple(float(w) for w in weights.ravel())
         if key != self._weights_key:  # a blocking upload: only when the weights change
             self._weights_key = key

@@ -37,7 +37,7 @@ import scipy.sparse
 
 from ..device import grid_defines
 from ..layout import packed_pattern
-from ..ops import check_device_array
+from ..ops import check_device_array, lens_weights_or_ones
 from ..ops.cfa import cfa_adjoint_np, cfa_sample_np
 from ..ops.epi import EpiGradient, check_maps, epi_matrix_np
 from ..ops.linalg import VectorOps, elementwise_size
@@ -202,13 +202,7 @@ class EpiAdmmSolver:
 
     def set_lens_weights(self, lens_weights=None):
         """Data-term weights [U, V] of every lens (None: ones); see AdmmSolver.set_lens_weights."""
-        if lens_weights is None:
-            weights = np.ones((self.U, self.V), np.float32)
-        else:
-            weights = np.asarray(lens_weights, dtype=np.float32)
-            if weights.shape != (self.U, self.V) or not np.all(np.isfinite(weights)) or np.any(weights < 0):
-                raise ValueError(f"lens weights must be a finite, non-negative {self.U}x{self.V} array, "
-                                 f"got shape {weights.shape}")
+        weights = lens_weights_or_ones(lens_weights, (self.U, self.V))
         self._weights.set(np.ascontiguousarray(weights.ravel()))
 
     def prepare(self, params: AdmmParams, prior: EpiPrior, lens_weights=None):
