@@ -387,8 +387,8 @@ def test_bench_stress_cli_json_and_table():
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
     assert report["lenses"] == [2, 2] and report["failures"] == 0 and report["device"]
-    assert [(r["case"], r["method"]) for r in report["rows"]] == [
-        (name, m) for name in ("all zero", "one NaN pixel") for m in METHODS]
+    assert [(r["case"], r["method"]) for r in report["rows"]] == [  # and the depth output on both
+        (name, m) for name in ("all zero", "one NaN pixel") for m in (*METHODS, stress.DEPTH)]
     for r in report["rows"]:
         assert r["contract"] == "pass" and r["repeatable"] is True and r["seconds"] >= 0
         assert set(r) >= {"case", "method", "outcome", "iterations", "max_abs", "finite", "history_finite",
@@ -398,7 +398,7 @@ def test_bench_stress_cli_json_and_table():
 
     result = runner.invoke(cli, ["bench", "stress", "--lenses", "2x2", "--only", "constant"])
     assert result.exit_code == 0, result.output
-    assert "| case" in result.stdout and "max |x|" in result.stdout and f"All {len(METHODS)} rows keep the contract" in result.stdout
+    assert "| case" in result.stdout and "max |x|" in result.stdout and f"All {len(METHODS) + 1} rows keep the contract" in result.stdout
 
     result = runner.invoke(cli, ["bench", "stress", "--lenses", "big"])
     assert result.exit_code == 1 and "--lenses" in result.stderr

@@ -106,7 +106,7 @@ def _validate_mosaic(mosaic) -> np.ndarray:
         raise ValueError(f"mosaic must have shape [H, W], got {array.shape}")
     array = np.ascontiguousarray(array, dtype=np.float32)
     if not np.all(np.isfinite(array)):
-        raise ValueError("mosaic must be finite (it holds NaN or infinity)")
+        raise ValueError("mosaic holds NaN or Inf values: depth needs a finite raw")
     return array
 
 
