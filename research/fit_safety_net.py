@@ -18,6 +18,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+from fit_auto import training_captures  # the same training captures as auto's rule (research/fit_auto.py)
 
 from lfcl.demosaic.methods import demosaic_lightfield
 from lfcl.evaluation.evaluate import simulated_capture
@@ -30,20 +31,6 @@ KS = (2.0, 3.0, 4.0, 6.0, 8.0, 12.0, math.inf)
 #: The rule: the best worst case (lower of the centre and mean gains over Malvar, every capture, level and
 #: method); among the k within TIE_DB of it, the one with the larger median mean-image gain.
 TIE_DB = 0.05
-TRAINING_PHOTOS = ("realdata/imageio_test_images/Blackmagic.dng", "realdata/digicam_corpus/Canon_PowerShot_G2_CRW_0304.CRW",
-                   "realdata/digicam_corpus/Kodak_DC120_P003908_uncompressed.KDC", "realdata/a2tools_quicktake/QT150_TEST150.QTK")
-
-
-def training_captures(shared: Path):
-    for scene in ("charts", "deadleaves", "finetexture"):
-        for seed in (1, 2):
-            yield f"{scene} {seed}", {"scene": scene, "seed": seed}
-    for photo in TRAINING_PHOTOS:
-        path = shared / photo
-        if path.is_file():
-            yield f"photo {path.name}", {"scene": "charts", "seed": 1, "texture": str(path)}
-
-
 def gains(planes, capture, malvar_scores):
     lightfield = planes_to_exchange(planes.astype(np.float32), LightFieldShape.from_exchange(capture.truth))
     return (psnr(centre_view(lightfield), centre_view(capture.truth)) - malvar_scores[0],

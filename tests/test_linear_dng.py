@@ -1,8 +1,8 @@
 """LinearRaw DNG outputs (lfcl.io.linear_dng, ``--format dng``): pixels, tags, and raw editors that open them.
 
 darktable-cli and rawtherapee-cli come from Debian (`apt-get install darktable rawtherapee`,
-.ci/run installs them): a test that cannot find one skips with the reason, and fails when
-``CI=true`` so that CI never passes without rendering.
+.ci/run installs them): a test that cannot find one fails with the command that installs it, so
+that no run passes without rendering.
 """
 
 from __future__ import annotations
@@ -191,7 +191,7 @@ def test_plan_views_each_and_cli_choices(tmp_path):
 # --------------------------------------------------------------------------- raw editors
 
 def test_rawpy_opens_and_renders_it(canon, tmp_path):
-    rawpy = pytest.importorskip("rawpy")
+    import rawpy  # a dependency of lfcl
     path = write_linear_dng(tmp_path / "p.dng", patches(canon), canon, {"method": "test"})
     with rawpy.imread(str(path)) as raw:
         np.testing.assert_allclose(raw.rgb_xyz_matrix[:3], CANON_XYZ_TO_CAMERA, atol=1e-4)
@@ -203,14 +203,11 @@ def test_rawpy_opens_and_renders_it(canon, tmp_path):
 
 
 def editor(name: str) -> str:
-    """The path of a raw editor's command line tool; skip (locally) or fail (CI=true) when it is missing."""
+    """The path of a raw editor's command line tool; the test fails, naming the install, when it is missing."""
     path = shutil.which(name)
     if path is None:
-        message = (f"{name} is not installed: `apt-get install darktable rawtherapee` (Debian) to run this test; "
-                   ".ci/run installs them")
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(message)
-        pytest.skip(message)
+        pytest.fail(f"{name} is not installed: `apt-get install darktable rawtherapee` (Debian) to run this test; "
+                    ".ci/run installs them")
     return path
 
 

@@ -321,7 +321,7 @@ def _write_dng(path, *, top=0, left=0, height=32, width=48, cfa=(0, 1, 1, 2), bl
     Per the DNG spec, CFAPattern and a 2x2 BlackLevel pattern start at the ActiveArea's
     top-left corner; every pixel is black(position) + SIGNAL[colour].
     """
-    tifffile = pytest.importorskip("tifffile")
+    import tifffile  # a dependency of lfcl
     rows = (np.arange(height)[:, None] - top) % 2
     cols = (np.arange(width)[None, :] - left) % 2
     colour = np.array(cfa).reshape(2, 2)[rows, cols]
@@ -390,7 +390,7 @@ def test_linear_dng_is_not_bayer(tmp_path):
 
 
 def _write_cfa_dng(path, repeat, cfa, plane_colors=None):
-    tifffile = pytest.importorskip("tifffile")
+    import tifffile  # a dependency of lfcl
     tags = [
         (50706, "B", 4, (1, 4, 0, 0), True),
         (50708, "s", 0, "Synthetic Cam", True),

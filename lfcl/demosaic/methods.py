@@ -189,8 +189,8 @@ def flat_threshold_for(method: str, skip_flat) -> float | None:
     return float(skip_flat)
 
 
-def _noise_for_flat_test(noise, raw_mosaic, pattern, pitch, origin, asked) -> tuple:
-    """(the noise model the flat-lens test uses, None) or (None, why there is none).
+def _noise_model_or_why(noise, raw_mosaic, pattern, pitch, origin, asked) -> tuple:
+    """(the noise model the flat-lens test and the safety net use, None) or (None, why there is none).
 
     Without a usable model the test cannot run; if it was not ``asked`` for (the default) the
     lenses are all solved and the outputs say why, if it was, that is an error.
@@ -214,7 +214,7 @@ def _with_safety_net(result: DemosaicResult, mosaic, pattern, pitch, origin, len
 
     began = time.perf_counter()
     mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
-    noise, why = _noise_for_flat_test(result.noise, mosaic, pattern, pitch, origin, asked=None)
+    noise, why = _noise_model_or_why(result.noise, mosaic, pattern, pitch, origin, asked=None)
     if noise is None:  # a raw too small to estimate the noise from: the outputs say the net did not act
         report = {"lenses": 0, "lenses_from_malvar": 0, "why": why.replace("not tested", "not applied")}
         return dataclasses.replace(result, parameters={**result.parameters, "safety_net": report})
@@ -351,7 +351,7 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     found, packing, real, full_shape = None, None, None, (3, *mosaic.shape)
     flat_noise, flat_why = None, "not tested (skip_flat off)"
     if flat_threshold is not None:
-        flat_noise, flat_why = _noise_for_flat_test(noise, raw_mosaic, pattern, pitch, origin, asked=skip_flat)
+        flat_noise, flat_why = _noise_model_or_why(noise, raw_mosaic, pattern, pitch, origin, asked=skip_flat)
         noise = noise if noise is not None else flat_noise
     if flat_noise is not None:  # flat lenses get their colour means and leave the solve (lfcl/demosaic/flat_lenses.py)
         statistics = LensFlatness(runtime, mosaic.shape, pattern, pitch, origin)(b, lens_weights, flat_noise.gain,
