@@ -379,10 +379,13 @@ def summary_text(raw, out_dir, summary: dict) -> str:
     if net and not net["lenses"]:
         lines.append(f"safety net: {net['why']}")
     elif net:
-        lines.append(f"safety net: {net['lenses_from_malvar']} of {net['lenses']} lenses took Malvar's colour means "
-                     f"(they agreed within the noise), {net['lenses_kept']} kept their own moved {net['k']:g} noise "
-                     f"sds towards Malvar's, the rest some of each ({net['colour_means_from_malvar']} of "
-                     f"{3 * net['lenses']} colour means from Malvar)")
+        mixed = net["lenses"] - net["lenses_from_malvar"] - net["lenses_kept"]
+        parts = [f"{net['lenses_from_malvar']} of {net['lenses']} lenses took Malvar's colour means (within the noise)"]
+        if net["lenses_kept"]:
+            parts.append(f"{net['lenses_kept']} kept theirs, moved {net['k']:g} noise sds towards Malvar's")
+        if mixed:
+            parts.append(f"{mixed} some colours of each")
+        lines.append("safety net: " + "; ".join(parts))
     secs = summary["seconds"]
     lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in secs.items()))
     per = summary.get("output_seconds", {})
