@@ -124,6 +124,7 @@ class Runtime:
         self.device = device
         self.context = cl.Context([device])
         self.queue = cl.CommandQueue(self.context)
+        self._side_queues: list[cl.CommandQueue] = []
         self._programs: dict[tuple, cl.Program] = {}
         self._kernels: dict[tuple, cl.Kernel] = {}
         self._lock = threading.Lock()
@@ -131,6 +132,14 @@ class Runtime:
     @property
     def name(self) -> str:
         return self.device.name.strip()
+
+    def side_queues(self, n: int) -> list[cl.CommandQueue]:
+        """``n`` more in-order queues on this device (made once), for work that overlaps: transfers on one,
+        kernels on another (lfcl.ops.malvar streams a GPU's uploads, filters and downloads so)."""
+        with self._lock:
+            while len(self._side_queues) < n:
+                self._side_queues.append(cl.CommandQueue(self.context, self.device))
+            return self._side_queues[:n]
 
     def program(self, name: str, defines: tuple = ()) -> cl.Program:
         """``lfcl/kernels/<name>.cl`` (after common.cl), built once per set of ``defines``.

@@ -30,11 +30,12 @@ import time
 
 import numpy as np
 
-from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.demosaic.driver import demosaic_grid
 from lfcl.demosaic.safety_net import apply_safety_net
 from lfcl.device import get_runtime
 from lfcl.evaluation.evaluate import simulated_capture
 from lfcl.evaluation.metrics import lightfield_scores
+from lfcl.grid.model import AlignedGrid
 from lfcl.layout import LightFieldShape, planes_to_exchange
 from lfcl.noise.model import estimate_noise
 from lfcl.ops.malvar import Malvar
@@ -98,7 +99,7 @@ def run_trace(args):
     for scene, seed, lux in itertools.product(args.scenes, args.seeds, args.lux):
         cap = capture(scene, seed, lux, args.lenses)
         noise = estimate_noise(cap.mosaic, cap.pattern, cap.pitch)
-        base = scores(demosaic_lightfield(cap.mosaic, cap.pattern, cap.pitch, "malvar").planes, cap.truth)
+        base = scores(demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), "malvar").planes, cap.truth)
         b = runtime.to_device(cap.mosaic)
         solver = EpiAdmmSolver(runtime, cap.mosaic.shape, cap.pattern, cap.pitch)
         for depth_kind in args.depth:
@@ -206,7 +207,7 @@ def run_table(args):
         for method in args.methods:
             for net in (False, True) if method != "malvar" else (False,):
                 began = time.perf_counter()
-                result = demosaic_lightfield(cap.mosaic, cap.pattern, cap.pitch, method, safety_net=net)
+                result = demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), method, safety_net=net)
                 seconds = time.perf_counter() - began
                 row = {"scene": scene, "seed": seed, "lux": lux, "method": method, "net": net, "seconds": seconds,
                        "iterations": result.iterations, **scores(result.planes, cap.truth)}
@@ -280,8 +281,8 @@ def run_profile(args):
     print(f"one CG step: {per_step * 1e3:.1f} ms; one iteration without its CG steps: "
           f"{(times['admm 10 iterations, 1 CG steps'] / 10 - per_step) * 1e3:.1f} ms")
     for method in ("admm-uv", "admm-uvst", "admm-epi"):
-        best_of(f"{method} end to end (net on)", lambda method=method: demosaic_lightfield(
-            cap.mosaic, cap.pattern, cap.pitch, method, noise=noise))
+        best_of(f"{method} end to end (net on)", lambda method=method: demosaic_grid(
+            cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), method, noise=noise))
     return times
 
 

@@ -20,9 +20,10 @@ from pathlib import Path
 import numpy as np
 from fit_auto import training_captures  # the same training captures as auto's rule (research/fit_auto.py)
 
-from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.demosaic.driver import demosaic_grid
 from lfcl.evaluation.evaluate import simulated_capture
 from lfcl.evaluation.metrics import centre_view, mean_image, psnr
+from lfcl.grid.model import AlignedGrid
 from lfcl.layout import LightFieldShape, planes_to_exchange
 from lfcl.noise.model import from_noise_profile
 from lfcl.ops.lensguard import guard_lens_means_np
@@ -50,11 +51,11 @@ def main(argv=None):
         for lux in (float(v) for v in args.lux.split(",")):
             capture = simulated_capture(args.lenses, lux, **source)
             noise = from_noise_profile(capture.noise_profile, capture.mosaic)
-            malvar = demosaic_lightfield(capture.mosaic, capture.pattern, capture.pitch, "malvar").planes
+            malvar = demosaic_grid(capture.mosaic, capture.pattern, AlignedGrid(capture.pitch), "malvar").planes
             m_scores = gains(malvar, capture, (0.0, 0.0))
             for method in args.methods.split(","):
-                x = demosaic_lightfield(capture.mosaic, capture.pattern, capture.pitch, method, noise=noise,
-                                        safety_net=False).planes
+                x = demosaic_grid(capture.mosaic, capture.pattern, AlignedGrid(capture.pitch), method, noise=noise,
+                                  safety_net=False).planes
                 for k in KS:
                     y = x if math.isinf(k) else guard_lens_means_np(x, malvar, capture.mosaic, capture.pitch,
                                                                     gain=noise.gain, floor=noise.floor, k=k)[0]

@@ -8,7 +8,7 @@ lens solved against the same method leaving the flat lenses out (the default).
 Per capture and method: one untimed warm-up of each setting (program builds; PoCL compiles
 every new global size once, the packed grids' sizes too), then ``--repeats`` rounds that run
 "solve every lens" and "skip flat lenses" in turn (so that load from other work on the
-machine falls on both alike); the figure is the median of the whole ``demosaic_lightfield``
+machine falls on both alike); the figure is the median of the whole ``demosaic_grid``
 call (start, flat test, packing, solve, copy back). Rows: seconds of both, their ratio
 (> 1: skipping is faster), iterations of both, the share of lenses found flat, the packed
 solver's lens rows, and the PSNR change (centre view / mean image, dB; > 0: skipping is better).
@@ -22,8 +22,9 @@ import time
 import numpy as np
 
 from lfcl.bench.timing import add_capture_arguments, captures
-from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.demosaic.driver import demosaic_grid
 from lfcl.evaluation.metrics import lightfield_scores
+from lfcl.grid.model import AlignedGrid
 from lfcl.io.images import write_json
 from lfcl.layout import LightFieldShape, planes_to_exchange
 from lfcl.noise.model import from_noise_profile
@@ -38,8 +39,8 @@ def measure(capture, label: str, repeats: int, threshold: float | None = None) -
 
     def run(skip_flat):
         began = time.perf_counter()
-        result = demosaic_lightfield(capture.mosaic, capture.pattern, capture.pitch, method, noise=noise,
-                                     start=start or None, skip_flat=skip_flat)
+        result = demosaic_grid(capture.mosaic, capture.pattern, AlignedGrid(capture.pitch), method, noise=noise,
+                               start=start or None, skip_flat=skip_flat)
         return time.perf_counter() - began, result
 
     for skip_flat in settings.values():  # warm-up: program builds, packed sizes

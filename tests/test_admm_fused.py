@@ -25,7 +25,6 @@ def _solver(runtime, dims, masked):
     solver = AdmmSolver(runtime, (S * U, T * V), "GRBG", (U, V), dims)
     solver.set_lens_weights(_weights(masked))
     solver.set_cross_channel(False)
-    solver.set_prior_mask(masked)
     return solver
 
 

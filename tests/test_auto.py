@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from lfcl.demosaic.auto import choose, fit_rule, fit_rules, load_rule, parse_candidate, row_gain, row_merit
-from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.demosaic.driver import demosaic_grid
+from lfcl.grid.model import AlignedGrid
 from lfcl.noise.model import NoiseEstimate
 
 ROWS_FILE = Path(__file__).resolve().parents[1] / "research" / "auto_rows.json"
@@ -148,10 +149,10 @@ def test_choose_records_the_view_and_refuses_an_unknown_one():
 def test_auto_runs_the_chosen_method_and_records_why(rng):
     mosaic = (0.3 + 0.02 * rng.standard_normal((36, 36))).astype(np.float32)
     noise = NoiseEstimate(gain=0.0, floor=0.004**2, sigma=0.004, source="test")
-    auto = demosaic_lightfield(mosaic, "GRBG", (9, 9), "auto", noise=noise)
+    auto = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "auto", noise=noise)
     choice = choose(0.004, lens_ratio=auto.parameters["auto"]["lens_ratio"])
-    direct = demosaic_lightfield(mosaic, "GRBG", (9, 9), choice.method, noise=noise, strength=choice.strength,
-                                 start=choice.start)
+    direct = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), choice.method, noise=noise, strength=choice.strength,
+                           start=choice.start)
     assert auto.method == choice.method and auto.parameters["start"] == choice.start
     assert auto.parameters["auto"]["method"] == choice.method and "sigma 0.004" in auto.parameters["auto"]["reason"]
     np.testing.assert_array_equal(auto.planes, direct.planes)
@@ -161,7 +162,7 @@ def test_auto_runs_the_chosen_method_and_records_why(rng):
 def test_bands_of_lens_rows_each_stop_on_their_own_rule(rng):
     mosaic = (0.3 + 0.02 * rng.standard_normal((27, 18))).astype(np.float32)
     noise = NoiseEstimate(gain=0.0, floor=0.004**2, sigma=0.004, source="test")
-    banded = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=noise, max_memory=30_000)
+    banded = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=noise, max_memory=30_000)
     assert banded.stop_reason.startswith("3 bands of lens rows") and np.all(np.isfinite(banded.planes))
     assert {h["band"] for h in banded.history} == {0, 1, 2}
 
@@ -196,10 +197,10 @@ def test_auto_without_linear4d_coefficients_for_the_pitch_runs_from_malvar(rng, 
     monkeypatch.setattr(lfcl.demosaic.auto, "load_rules", lambda: {"rules": {"both": [band]}})
     mosaic = (0.3 + 0.02 * rng.standard_normal((25, 25))).astype(np.float32)  # 5x5 lenses of 5x5 pixels
     noise = NoiseEstimate(gain=0.0, floor=0.004**2, sigma=0.004, source="test")
-    auto = demosaic_lightfield(mosaic, "GRBG", (5, 5), "auto", noise=noise)
+    auto = demosaic_grid(mosaic, "GRBG", AlignedGrid((5, 5)), "auto", noise=noise)
     record = auto.parameters["auto"]
     assert (record["method"], record["strength"], record["start"]) == (*ran, "malvar")
     assert record["replaced"]["start" if candidate != "linear4d" else "method"] == candidate.rpartition(":")[2]
     assert "coefficients for 9x9 lenses only, not 5x5" in record["reason"]
-    direct = demosaic_lightfield(mosaic, "GRBG", (5, 5), ran[0], noise=noise, strength=ran[1])
+    direct = demosaic_grid(mosaic, "GRBG", AlignedGrid((5, 5)), ran[0], noise=noise, strength=ran[1])
     np.testing.assert_array_equal(auto.planes, direct.planes)

@@ -171,9 +171,13 @@ def test_bench_matrix_finds_the_real_light_fields_it_is_given(tmp_path):
 
 
 def test_bench_api_times_the_public_call_against_its_peer():
-    result = _invoke(["bench", "api", "--size", "64x96", "--repeats", "2", "--json"])
+    result = _invoke(["bench", "api", "--size", "63x90", "--repeats", "2", "--json"])
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
-    assert report["size"] == [64, 96] and report["repeats"] == 2
+    assert report["size"] == [63, 90] and report["repeats"] == 2
     assert report["lfcl_malvar_seconds"] > 0 and report["colour_demosaicing_seconds"] > 0
     assert report["speedup"] == pytest.approx(report["colour_demosaicing_seconds"] / report["lfcl_malvar_seconds"])
+    assert report["lightfield_speedup"] == pytest.approx(
+        report["colour_demosaicing_lightfield_seconds"] / report["lfcl_lightfield_seconds"])
+    bad = _invoke(["bench", "api", "--size", "64x96", "--repeats", "1"])
+    assert bad.exit_code != 0 and "whole 9x9 lenses" in bad.output

@@ -11,8 +11,9 @@ import pytest
 from click.testing import CliRunner
 
 from lfcl.cli import cli
+from lfcl.demosaic.driver import demosaic_grid
 from lfcl.demosaic.flat_lenses import LADDER_STEPS, fill_flat, flat_lenses, pack_lenses
-from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.grid.model import AlignedGrid
 from lfcl.layout import channel_map
 from lfcl.noise.model import NoiseEstimate
 from lfcl.ops.malvar import malvar_np
@@ -145,8 +146,8 @@ def mixed():
 
 def test_fixed_budget_solve_is_the_reference_on_the_busy_lenses(mixed):
     mosaic, edged = mixed
-    got = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=5, skip_flat=True,
-                              safety_net=False)
+    got = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=NOISE, iterations=5, skip_flat=True,
+                        safety_net=False)
     found = flat_lenses(mosaic, "GRBG", (9, 9), NOISE)
     assert got.parameters["flat_lenses"]["flat_lenses"] == found.flat.sum() > 0
     assert not found.flat[edged].any()
@@ -166,7 +167,7 @@ def test_fixed_budget_solve_is_the_reference_on_the_busy_lenses(mixed):
         np.testing.assert_allclose(got_lenses[s, t].reshape(3, -1).T, np.broadcast_to(found.means[s, t], (81, 3)),
                                    rtol=1e-6)
     # and off, every lens is solved: the busy ones as above
-    plain = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=5, safety_net=False)
+    plain = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=NOISE, iterations=5, safety_net=False)
     np.testing.assert_allclose(by_lens(plain.planes)[busy], got_lenses[busy], atol=1e-5)
     assert plain.parameters["flat_lenses"]["flat_lenses"] == 0
 
@@ -174,8 +175,8 @@ def test_fixed_budget_solve_is_the_reference_on_the_busy_lenses(mixed):
 def test_the_stop_rule_is_over_the_solved_lenses(mixed):
     mosaic, _ = mixed
     seen = []
-    result = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv-xc", noise=NOISE, skip_flat=True,
-                                 callback=lambda record, x: seen.append((record.rms_change, x.get())))
+    result = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv-xc", noise=NOISE, skip_flat=True,
+                           callback=lambda record, x: seen.append((record.rms_change, x.get())))
     solved = result.parameters["flat_lenses"]["lenses"] - result.parameters["flat_lenses"]["flat_lenses"]
     assert result.iterations == len(seen) >= 2
     for (rms, x), (_, previous) in zip(seen[1:], seen):
@@ -185,9 +186,9 @@ def test_the_stop_rule_is_over_the_solved_lenses(mixed):
 
 def test_bands_of_the_packed_mosaic_give_the_same_result(mixed):
     mosaic, _ = mixed
-    whole = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=4, skip_flat=True)
-    banded = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=4, max_memory=120_000,
-                                 skip_flat=True)
+    whole = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=NOISE, iterations=4, skip_flat=True)
+    banded = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=NOISE, iterations=4,
+                           max_memory=120_000, skip_flat=True)
     assert "bands" in banded.stop_reason
     np.testing.assert_allclose(banded.planes, whole.planes, atol=1e-5)
 
@@ -200,8 +201,8 @@ def test_vignetted_lenses_fill_their_dark_pixels_too(mixed):
     response = np.clip(1.2 - 0.06 * (u**2 + v**2), 0, 1)
     assert (response < DEFAULT_THRESHOLD).any()
     raw = mosaic * np.tile(response, (4, 6)).astype(np.float32)
-    result = demosaic_lightfield(raw, "GRBG", (9, 9), "admm-uv", noise=NOISE, lens_response=response, skip_flat=True,
-                                 safety_net=False)
+    result = demosaic_grid(raw, "GRBG", AlignedGrid((9, 9), lens_response=response), "admm-uv", noise=NOISE,
+                           skip_flat=True, safety_net=False)
     assert np.all(np.isfinite(result.planes))
     flat = result.parameters["flat_lenses"]
     assert flat["flat_lenses"] > 0
@@ -213,7 +214,8 @@ def test_vignetted_lenses_fill_their_dark_pixels_too(mixed):
 @pytest.mark.parametrize("shape", [(27, 36), (9, 36)])  # one lens row: nothing to shrink, still nothing to solve
 def test_a_flat_image_needs_no_iterations(shape):
     mosaic = noisy(np.full(shape, 0.3), seed=9)
-    result = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=NOISE, skip_flat=True, safety_net=False)
+    result = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=NOISE, skip_flat=True,
+                           safety_net=False)
     assert result.iterations == 0 and "flat" in result.stop_reason
     assert result.parameters["flat_lenses"]["share"] == 1.0
     np.testing.assert_allclose(result.planes, 0.3, atol=4 * math.sqrt(GAIN * 0.3 + FLOOR) / math.sqrt(20))
@@ -227,11 +229,11 @@ def test_a_flat_image_needs_no_iterations(shape):
 ])
 def test_bad_skip_flat_is_one_line(mixed, method, skip_flat, message):
     with pytest.raises(ValueError, match=message):
-        demosaic_lightfield(mixed[0], "GRBG", (9, 9), method, noise=NOISE, skip_flat=skip_flat)
+        demosaic_grid(mixed[0], "GRBG", AlignedGrid((9, 9)), method, noise=NOISE, skip_flat=skip_flat)
 
 
 def test_the_coupled_priors_solve_every_lens_by_default(mixed):
-    result = demosaic_lightfield(mixed[0], "GRBG", (9, 9), "admm-st", noise=NOISE, iterations=2)
+    result = demosaic_grid(mixed[0], "GRBG", AlignedGrid((9, 9)), "admm-st", noise=NOISE, iterations=2)
     assert "flat_lenses" not in result.parameters
 
 
@@ -263,11 +265,11 @@ def test_process_reports_the_skipped_lenses(tmp_path):
 
 
 def test_the_skip_is_off_by_default_and_needs_a_noise_model_when_asked_for(mixed):
-    result = demosaic_lightfield(mixed[0], "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=2)
+    result = demosaic_grid(mixed[0], "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=NOISE, iterations=2)
     assert result.parameters["flat_lenses"] == {"flat_lenses": 0, "why": "not tested (skip_flat off)"}
     one_lens = noisy(np.full((9, 9), 0.3), seed=2)  # too small to estimate the noise from
     with pytest.raises(ValueError, match="skipping flat lenses: no noise model"):  # asked for: an error
-        demosaic_lightfield(one_lens, "GRBG", (9, 9), "admm-uv", lam=0.01, iterations=2, skip_flat=True)
+        demosaic_grid(one_lens, "GRBG", AlignedGrid((9, 9)), "admm-uv", lam=0.01, iterations=2, skip_flat=True)
 
 
 def test_the_benchmark_writes_one_row_per_capture_and_method(tmp_path):
@@ -287,9 +289,9 @@ def test_the_benchmark_writes_one_row_per_capture_and_method(tmp_path):
 
 def test_flat_lenses_too_few_to_shrink_the_solve_are_solved():
     mosaic, edged = lens_mosaic((4, 6), edge_every=2, seed=3)  # every lens row keeps busy lenses of both parities
-    result = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=NOISE, skip_flat=True)
+    result = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=NOISE, skip_flat=True)
     record = result.parameters["flat_lenses"]
     assert record["found"] == (~edged).sum() and record["flat_lenses"] == 0
     assert "too few to shrink the solve" in record["why"] and record["solved_lens_rows"] == 4
-    plain = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=NOISE)
+    plain = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=NOISE)
     np.testing.assert_array_equal(result.planes, plain.planes)

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.demosaic.driver import demosaic_grid
 from lfcl.evaluation.metrics import lightfield_scores
+from lfcl.grid.model import AlignedGrid
 from lfcl.grid.vignetting import flat_field, lens_response_from_white
 from lfcl.layout import LightFieldShape, planes_to_exchange
 from lfcl.noise.model import from_noise_profile
@@ -50,8 +51,8 @@ def test_flat_fielding_improves_a_vignetted_capture(vignetted, method):
     shape = LightFieldShape.from_exchange(vignetted.truth)
     scores = {}
     for label, response_used in (("plain", None), ("flat", response)):
-        result = demosaic_lightfield(mosaic, vignetted.pattern, (9, 9), method, noise=noise,
-                                     lens_response=response_used)
+        result = demosaic_grid(mosaic, vignetted.pattern, AlignedGrid((9, 9), lens_response=response_used), method,
+                               noise=noise)
         scores[label] = lightfield_scores(planes_to_exchange(result.planes, shape), vignetted.truth)
     assert scores["flat"]["psnr_mean"] > scores["plain"]["psnr_mean"] + 1.5  # measured +2.5 (malvar), more for admm-uv
     assert scores["flat"]["psnr_center"] >= scores["plain"]["psnr_center"] - 0.1

@@ -20,9 +20,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from lfcl.demosaic.resampled import demosaic_resampled
+from lfcl.demosaic.driver import demosaic_grid
 from lfcl.evaluation.metrics import lightfield_scores, psnr
 from lfcl.grid import calibrate_array, load_calibration
+from lfcl.grid.model import ResampledGrid
 from lfcl.noise.model import from_noise_profile
 from lfcl.sim.capture import simulate_grid
 
@@ -54,7 +55,8 @@ def calibrated(request):
 @pytest.fixture(scope="module")
 def demosaiced(calibrated):
     cap, cal, raw, noise = calibrated
-    return {m: demosaic_resampled(raw, cap.pattern, cal, m, noise=noise) for m in ("malvar", "admm-uv")}
+    grid = ResampledGrid.of(cal, cap.pattern)
+    return {m: demosaic_grid(raw, cap.pattern, grid, m, noise=noise) for m in ("malvar", "admm-uv")}
 
 
 def test_calibration_gives_the_truth_s_regular_grid(calibrated, demosaiced):
@@ -90,7 +92,7 @@ def test_a_half_pixel_grid_error_falls_below_the_floor(calibrated):
     g = cal.grid
     wrong = dataclasses.replace(cal, grid=dataclasses.replace(g, origin=(g.origin[0] + 0.5, g.origin[1] + 0.5)))
     box = (*cap.meta["lightfield"]["lens_origin"], *cap.meta["lenses"])
-    result = demosaic_resampled(raw, cap.pattern, wrong, "malvar", lenses=box)
+    result = demosaic_grid(raw, cap.pattern, ResampledGrid.of(wrong, cap.pattern, lenses=box), "malvar")
     assert lightfield_scores(result.lightfield, cap.truth)["psnr_mean"] < MEAN_FLOOR
     assert inner_views_psnr(result.lightfield, cap.truth) < INNER_FLOOR
 
@@ -116,7 +118,7 @@ def test_cli_simulate_calibrate_and_demosaic_from_files(tmp_path):
     mosaic = read_mosaic(sim / "raw.dng")
     cal = load_calibration(tmp_path / "cal.json", sensor_shape=mosaic.data.shape, pattern=mosaic.pattern)
     noise = from_noise_profile(mosaic.noise_profile, mosaic.data)
-    out = demosaic_resampled(mosaic.data, mosaic.pattern, cal, "admm-uv", noise=noise)
+    out = demosaic_grid(mosaic.data, mosaic.pattern, ResampledGrid.of(cal, mosaic.pattern), "admm-uv", noise=noise)
     truth = np.load(sim / "truth.npy")
     meta = json.loads((sim / "meta.json").read_text())
     assert meta["mode"] == "grid" and meta["truth"]["shape"] == list(truth.shape) == list(out.lightfield.shape)

@@ -144,13 +144,14 @@ def test_auto_says_when_the_content_lies_outside_what_its_band_was_fitted_on():
 
 
 def test_auto_records_the_ratio_of_the_raw(rng):
-    from lfcl.demosaic.methods import demosaic_lightfield
+    from lfcl.demosaic.driver import demosaic_grid
+    from lfcl.grid.model import AlignedGrid
 
     flat_lenses = rng.random((20, 20, 1, 1)) * np.ones((1, 1, 9, 9))
     flat_lenses[:, :, :, 4] += 0.2
     mosaic = lenses_mosaic(flat_lenses * 0.5 + rng.normal(0, 0.004, flat_lenses.shape))
     noise = NoiseEstimate(gain=0.0, floor=0.004**2, sigma=0.004, source="raw")
-    result = demosaic_lightfield(mosaic, "GRBG", (9, 9), "auto", noise=noise)
+    result = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "auto", noise=noise)
     auto = result.parameters["auto"]
     assert auto["lens_ratio"] == pytest.approx(cross_lens_ratio(mosaic, (9, 9), noise))
     trained = choose(noise.sigma)  # the shipped band

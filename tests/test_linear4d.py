@@ -418,15 +418,16 @@ def test_public_function_matches_numpy_with_a_given_noise(runtime):
 
 
 def test_demosaic_lightfield_runs_linear4d(runtime):
-    from lfcl.demosaic.methods import demosaic_lightfield
+    from lfcl.demosaic.driver import demosaic_grid
+    from lfcl.grid.model import AlignedGrid
     from lfcl.noise.model import NoiseEstimate
     from lfcl.sim import simulate
 
     capture = simulate("charts", lenses=(4, 4), lux=12.0, seed=0)
     mosaic = capture.normalised_raw()
     noise = NoiseEstimate(gain=1e-4, floor=1e-6, sigma=0.005, source="test")
-    result = demosaic_lightfield(mosaic, capture.pattern, (9, 9), "linear4d", noise=noise, safety_net=False)
+    result = demosaic_grid(mosaic, capture.pattern, AlignedGrid((9, 9)), "linear4d", noise=noise, safety_net=False)
     assert result.method == "linear4d" and result.iterations == 0 and result.noise is noise
     np.testing.assert_array_equal(result.planes, linear4d(runtime, mosaic, capture.pattern, (9, 9), noise=noise))
-    estimated = demosaic_lightfield(mosaic, capture.pattern, (9, 9), "linear4d")  # noise from the raw
+    estimated = demosaic_grid(mosaic, capture.pattern, AlignedGrid((9, 9)), "linear4d")  # noise from the raw
     assert estimated.noise is not None and estimated.noise.source == "raw"

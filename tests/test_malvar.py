@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import zlib
 from pathlib import Path
 
@@ -11,7 +12,7 @@ import pytest
 
 from lfcl.device import get_runtime
 from lfcl.layout import PATTERNS, packed_pattern
-from lfcl.ops.malvar import Malvar, malvar, malvar_np, mirror_index
+from lfcl.ops.malvar import Malvar, _image_streamed, malvar, malvar_np, mirror_index, row_bands
 
 # colour-demosaicing 0.2.7 imports convolve from the deprecated scipy.ndimage.filters.
 pytestmark = pytest.mark.filterwarnings("ignore:Please import:DeprecationWarning")
@@ -185,6 +186,27 @@ def test_malvar_returns_hwc_float32(runtime):
     np.testing.assert_allclose(
         malvar(ints, "RGGB"), malvar_np(ints.astype(np.float32), "RGGB").transpose(1, 2, 0), rtol=0, atol=1e-4
     )
+
+
+@pytest.mark.parametrize("shape, rows", [((1, 1), 2), ((2, 5), 2), ((9, 7), 2), ((9, 7), 4), ((37, 13), 5), ((64, 33), 512)])
+def test_streamed_bands_match_numpy(runtime, shape, rows):
+    # The GPU path (bands of rows up, through the filters and down on three queues, each band waiting for its
+    # neighbours' uploads) run here on any device: band edges must not show, odd last bands included.
+    mosaic = _mosaic(shape, seed=sum(shape) + rows)
+    op = Malvar(runtime, shape, "GBRG", origin=(1, 0))
+    np.testing.assert_allclose(_image_streamed(op, mosaic, rows=rows),
+                               malvar_np(mosaic, "GBRG", origin=(1, 0)).transpose(1, 2, 0), rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("height, rows", [(1, 2), (2, 2), (3, 2), (9, 4), (10, 4), (1024, 512), (1025, 512)])
+def test_row_bands_cover_the_image_with_bands_of_two_rows_or_more(height, rows):
+    bands = row_bands(height, rows)
+    assert bands[0][0] == 0 and bands[-1][1] == height
+    assert all(a[1] == b[0] for a, b in itertools.pairwise(bands))
+    assert all(r1 - r0 <= rows + 1 for r0, r1 in bands)
+    assert all(r1 - r0 >= 2 for r0, r1 in bands) or len(bands) == 1
+    with pytest.raises(ValueError, match="2 rows"):
+        row_bands(height, 1)
 
 
 @pytest.mark.parametrize(

@@ -82,13 +82,14 @@ def test_the_public_api_demosaics_to_the_exchange_layout_and_processes_a_file(tm
     import json
 
     import lfcl
-    from lfcl.demosaic.methods import demosaic_lightfield
+    from lfcl.demosaic.driver import demosaic_grid
+    from lfcl.grid.model import AlignedGrid
     from lfcl.sim import simulate, write_capture
 
     capture = simulate("charts", lenses=(4, 6), lux=12, seed=1)
     mosaic = capture.normalised_raw()
     lightfield = lfcl.lightfield(mosaic, pattern=capture.pattern, pitch=9, method="admm-uvst", iterations=3)
-    planes = demosaic_lightfield(mosaic, capture.pattern, (9, 9), "admm-uvst", iterations=3).planes
+    planes = demosaic_grid(mosaic, capture.pattern, AlignedGrid((9, 9)), "admm-uvst", iterations=3).planes
     assert lightfield.shape == (4, 6, 9, 9, 3) and lightfield.dtype == np.float32
     np.testing.assert_array_equal(lightfield[1, 2, 3, 4], planes[:, 1 * 9 + 3, 2 * 9 + 4])  # row s*U+u, col t*V+v
     folder = write_capture(capture, tmp_path / "cap")

@@ -134,8 +134,9 @@ def test_white_image_path_matches_the_calibration_file(captures, processed, tmp_
 
 
 def test_an_aligned_calibration_keeps_the_exact_slicing(captures, processed):
-    from lfcl.demosaic.methods import demosaic_lightfield
+    from lfcl.demosaic.driver import demosaic_grid
     from lfcl.grid import load_calibration
+    from lfcl.grid.model import AlignedGrid
     from lfcl.grid.vignetting import lens_response_from_calibration
     from lfcl.io.raw import read_mosaic
     from lfcl.layout import LightFieldShape, planes_to_exchange
@@ -146,8 +147,8 @@ def test_an_aligned_calibration_keeps_the_exact_slicing(captures, processed):
     mosaic = read_mosaic(captures / "aligned" / "raw.dng")
     cal = load_calibration(captures / "aligned" / "cal.json", mosaic.data.shape, mosaic.pattern)
     (r0, c0), (S, T) = geometry["first_lens_pixel"], geometry["lenses"]
-    planes = demosaic_lightfield(mosaic.data[r0:r0 + S * 9, c0:c0 + T * 9], mosaic.pattern, (9, 9), "malvar",
-                                 origin=(r0, c0), lens_response=lens_response_from_calibration(cal, (9, 9))).planes
+    grid = AlignedGrid((9, 9), origin=(r0, c0), lens_response=lens_response_from_calibration(cal, (9, 9)))
+    planes = demosaic_grid(mosaic.data[r0:r0 + S * 9, c0:c0 + T * 9], mosaic.pattern, grid, "malvar").planes
     lightfield = np.load(out / "lightfield.npy")
     np.testing.assert_array_equal(lightfield, planes_to_exchange(planes, LightFieldShape(S, T, 9, 9)))
     scores = lightfield_scores(lightfield, truth(captures, "aligned"))
@@ -173,7 +174,7 @@ def test_batch_writes_the_same_bytes_as_process(captures, processed, tmp_path):
 @pytest.mark.parametrize("grid", ["rotated", "aligned"])
 def test_auto_names_and_runs_its_choice(grid, processed):
     from lfcl.demosaic.auto import AUTO_FALLBACK, choose
-    from lfcl.demosaic.resampled import GRID_METHODS
+    from lfcl.demosaic.names import RESAMPLED_METHODS as GRID_METHODS
 
     out, summary, text = processed(grid, "auto", "--outputs", "lightfield", "--no-previews")
     auto = summary["parameters"]["auto"]
@@ -265,9 +266,9 @@ def test_tolerance_db_sets_the_stop(grid, processed):
 
 def test_a_method_the_grid_does_not_take_is_one_line(captures, tmp_path):
     from lfcl.demosaic.names import METHODS
-    from lfcl.demosaic.resampled import GRID_METHOD_NAMES
+    from lfcl.grid.model import ResampledGrid
 
-    others = [m for m in METHODS if m not in GRID_METHOD_NAMES]
+    others = [m for m in METHODS if m not in ResampledGrid.methods]
     assert others, "every method runs on resampled grids: test another refusal"
     hexagonal = captures / "hex"
     for grid in (["--calibration", hexagonal / "cal.json"], ["--white", hexagonal / "white.dng"]):
@@ -276,7 +277,7 @@ def test_a_method_the_grid_does_not_take_is_one_line(captures, tmp_path):
         assert result.exit_code == 1
         lines = result.output.strip().splitlines()
         assert len(lines) == 1 and f"method {others[0]!r} does not run on the hexagonal lens grid" in lines[0], lines
-        assert ", ".join(GRID_METHOD_NAMES) in lines[0] and not out.exists()
+        assert ", ".join(ResampledGrid.methods) in lines[0] and not out.exists()
     out = tmp_path / "batch"  # the batch refuses it once, before starting a cluster
     result = invoke("batch", hexagonal / "raw.dng", "--calibration", hexagonal / "cal.json", "--method", others[0],
                     "-o", out)

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import scipy.sparse
 
-from lfcl.demosaic.resampled import demosaic_resampled
+from lfcl.demosaic.driver import demosaic_grid
+from lfcl.grid.model import ResampledGrid
 from lfcl.grid.resampling import sampling_model
 from lfcl.layout import planes_to_exchange
 from lfcl.noise.resampled import estimate_grid_noise
@@ -113,7 +114,7 @@ def test_solver_refuses_what_it_cannot_do(runtime):
 
 def test_malvar_is_2d_malvar_then_resampling(rng):
     model, raw, _, _, x0 = smooth_problem(rng, "rotated", pattern="BGGR")
-    result = demosaic_resampled(raw, "BGGR", SMALL["rotated"], "malvar")
+    result = demosaic_grid(raw, "BGGR", ResampledGrid.of(SMALL["rotated"], "BGGR"), "malvar")
     np.testing.assert_allclose(result.planes, x0, atol=2e-5)
     assert result.lightfield.shape == (*model.lenses, *model.views, 3)
     np.testing.assert_array_equal(result.lightfield, planes_to_exchange(result.planes, model.shape))
@@ -127,7 +128,7 @@ def test_admm_uv_entry_point_follows_the_method_defaults(rng):
 
     _, raw, _, _, _ = smooth_problem(rng, "hex")
     noise = NoiseEstimate(gain=0.0, floor=1e-4, sigma=123.0, source="test")  # sigma_at(level) = 0.01
-    result = demosaic_resampled(raw, "GRBG", SMALL["hex"], "admm-uv", noise=noise, strength=1.5)
+    result = demosaic_grid(raw, "GRBG", ResampledGrid.of(SMALL["hex"], "GRBG"), "admm-uv", noise=noise, strength=1.5)
     d, g = ADMM_DEFAULTS["admm-uv"], GRID_TUNING["admm-uv"]
     assert result.parameters["sigma"] == pytest.approx(0.01)
     assert result.parameters["lam"] == pytest.approx(1.5 * g.strength * d.lam_per_sigma * 0.01)
@@ -135,12 +136,13 @@ def test_admm_uv_entry_point_follows_the_method_defaults(rng):
     assert result.parameters["interpolation_weight"] == g.interpolation_weight
     assert 1 < result.iterations < d.max_iter and result.stop_reason.startswith("rms change")
     assert np.all(np.isfinite(result.lightfield)) and result.lightfield.dtype == np.float32
-    fixed = demosaic_resampled(raw, "GRBG", SMALL["hex"], "admm-uvst", noise=noise, iterations=3, lam=0.001)
+    fixed = demosaic_grid(raw, "GRBG", ResampledGrid.of(SMALL["hex"], "GRBG"), "admm-uvst", noise=noise, iterations=3,
+                          lam=0.001)
     assert fixed.iterations == 3 and fixed.parameters["lam"] == 0.001
 
 
 @pytest.mark.parametrize("kwargs, words", [
-    ({"method": "linear4d"}, "not available"),
+    ({"method": "linear4d"}, "does not run on"),
     ({"raw": np.zeros((10, 10), np.float32)}, "sensor"),
     ({"raw": np.full((45, 51), np.nan, np.float32)}, "NaN"),
     ({"pattern": "XYZW"}, "pattern"),
@@ -148,7 +150,7 @@ def test_admm_uv_entry_point_follows_the_method_defaults(rng):
 def test_entry_point_bad_input(kwargs, words):
     args = {"raw": np.zeros((45, 51), np.float32), "pattern": "GRBG", "method": "malvar", **kwargs}
     with pytest.raises(ValueError, match=words):
-        demosaic_resampled(args["raw"], args["pattern"], SMALL["hex"], args["method"])
+        demosaic_grid(args["raw"], args["pattern"], ResampledGrid.of(SMALL["hex"], args["pattern"]), args["method"])
 
 
 def test_grid_noise_estimate_recovers_the_sensor_noise():

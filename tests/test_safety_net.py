@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.demosaic.driver import demosaic_grid
 from lfcl.demosaic.names import DEFAULT_METHOD
 from lfcl.demosaic.safety_net import NET_K
+from lfcl.grid.model import AlignedGrid
 from lfcl.noise.model import NoiseEstimate
 from lfcl.ops.lensguard import guard_lens_means_np
 from lfcl.ops.malvar import malvar_np
@@ -46,8 +47,8 @@ def test_with_the_net_no_view_is_worse_than_malvar(finetexture, lux, method):
 def test_the_net_is_the_lens_mean_guard_against_malvar_of_the_same_mosaic(rng):
     mosaic = (0.3 + 0.05 * rng.standard_normal((27, 36))).astype(np.float32)
     noise = NoiseEstimate(gain=1e-3, floor=1e-5, sigma=0.018, source="test")
-    plain = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=noise, iterations=3, safety_net=False)
-    netted = demosaic_lightfield(mosaic, "GRBG", (9, 9), "admm-uv", noise=noise, iterations=3)
+    plain = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=noise, iterations=3, safety_net=False)
+    netted = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=noise, iterations=3)
     expected, replaced = guard_lens_means_np(plain.planes, malvar_np(mosaic, "GRBG"), mosaic, (9, 9),
                                              gain=noise.gain, floor=noise.floor, k=NET_K)
     np.testing.assert_allclose(netted.planes, expected, atol=2e-5)
@@ -59,12 +60,12 @@ def test_the_net_is_the_lens_mean_guard_against_malvar_of_the_same_mosaic(rng):
 
 def test_malvar_needs_no_net_and_auto_records_it_once(rng):
     mosaic = (0.3 + 0.05 * rng.standard_normal((27, 36))).astype(np.float32)
-    assert "safety_net" not in demosaic_lightfield(mosaic, "GRBG", (9, 9), "malvar").parameters
+    assert "safety_net" not in demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "malvar").parameters
 
 
 def test_without_a_noise_model_the_net_says_it_did_not_act():
     one_lens = np.full((9, 9), 0.3, np.float32)  # too small to estimate the noise from
-    result = demosaic_lightfield(one_lens, "GRBG", (9, 9), "admm-uv", lam=0.01, iterations=2)
+    result = demosaic_grid(one_lens, "GRBG", AlignedGrid((9, 9)), "admm-uv", lam=0.01, iterations=2)
     assert result.parameters["safety_net"]["lenses"] == 0
     assert result.parameters["safety_net"]["why"].startswith("not applied: no noise model")
 

@@ -11,7 +11,8 @@ import pytest
 from click.testing import CliRunner
 
 from lfcl.cli import cli
-from lfcl.demosaic.methods import demosaic_lightfield
+from lfcl.demosaic.driver import demosaic_grid
+from lfcl.grid.model import AlignedGrid
 from lfcl.noise.model import NoiseEstimate
 from lfcl.ops.linear4d import linear4d
 from lfcl.ops.malvar import malvar_np
@@ -33,8 +34,8 @@ def textured_mosaic():
 def test_linear4d_start_is_admm_from_the_linear4d_planes(runtime, textured_mosaic):
     """With a fixed budget, start="linear4d" is the float64 reference ADMM run from linear4d's output."""
     b = textured_mosaic
-    got = demosaic_lightfield(b, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=6, start="linear4d",
-                              safety_net=False)  # every lens solved, no net: as the reference does
+    got = demosaic_grid(b, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=NOISE, iterations=6, start="linear4d",
+                        safety_net=False)  # every lens solved, no net: as the reference does
     x0 = linear4d(runtime, b, "GRBG", (9, 9), (0, 0), NOISE).astype(np.float64)
     # the device's x-update is the exact per-lens solve: the reference gets CG run to convergence
     reference_params = dataclasses.replace(
@@ -52,8 +53,8 @@ def test_linear4d_start_is_admm_from_the_linear4d_planes(runtime, textured_mosai
 def test_lens_malvar_start_is_admm_from_the_lens_bounded_malvar_planes(textured_mosaic):
     """start="lens-malvar" is the float64 reference ADMM run from Malvar bounded to each lens."""
     b = textured_mosaic
-    got = demosaic_lightfield(b, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=6, start="lens-malvar",
-                              safety_net=False)
+    got = demosaic_grid(b, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=NOISE, iterations=6, start="lens-malvar",
+                        safety_net=False)
     reference_params = dataclasses.replace(
         AdmmParams(**{k: got.parameters[k] for k in AdmmParams.__dataclass_fields__}), cg_steps=200, cg_tol=1e-12)
     x0 = malvar_np(b, "GRBG", lens=(9, 9)).astype(np.float64)
@@ -85,8 +86,8 @@ def test_guarded_start_is_admm_from_linear4d_with_malvar_in_the_outlier_lenses(r
 
     b = textured_mosaic.copy()
     b[9:18, 18:27] = 1.0  # a clipped highlight filling one lens: a sharp lens-to-lens break
-    got = demosaic_lightfield(b, "GRBG", (9, 9), "admm-uv", noise=NOISE, iterations=6, start="guarded",
-                              safety_net=False)
+    got = demosaic_grid(b, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=NOISE, iterations=6, start="guarded",
+                        safety_net=False)
     linear = linear4d(runtime, b, "GRBG", (9, 9), (0, 0), NOISE).astype(np.float64)
     malvar = malvar_np(b, "GRBG").astype(np.float64)
     chosen = malvar_lenses(lens_disagreement_np(linear, malvar, b, (9, 9), gain=NOISE.gain, floor=NOISE.floor))
@@ -102,16 +103,16 @@ def test_guarded_start_is_admm_from_linear4d_with_malvar_in_the_outlier_lenses(r
 
 
 def test_default_start_is_malvar(textured_mosaic):
-    default = demosaic_lightfield(textured_mosaic, "GRBG", (9, 9), "admm-uv-xc", noise=NOISE, iterations=3)
-    malvar = demosaic_lightfield(textured_mosaic, "GRBG", (9, 9), "admm-uv-xc", noise=NOISE, iterations=3,
-                                 start="malvar")
+    default = demosaic_grid(textured_mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv-xc", noise=NOISE, iterations=3)
+    malvar = demosaic_grid(textured_mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv-xc", noise=NOISE, iterations=3,
+                           start="malvar")
     assert default.parameters["start"] == "malvar"
     np.testing.assert_array_equal(default.planes, malvar.planes)
 
 
 def test_a_bad_start_is_one_line(textured_mosaic):
     with pytest.raises(ValueError, match="start must be one of malvar, linear4d"):
-        demosaic_lightfield(textured_mosaic, "GRBG", (9, 9), "admm-uv", start="bilinear")
+        demosaic_grid(textured_mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv", start="bilinear")
 
 
 def test_process_start_option_reaches_the_solver_and_the_summary(tmp_path):

@@ -22,7 +22,9 @@ import pytest
 from click.testing import CliRunner
 
 from lfcl.bench import stress
-from lfcl.demosaic.methods import METHODS, demosaic_lightfield
+from lfcl.demosaic.driver import demosaic_grid
+from lfcl.demosaic.methods import METHODS
+from lfcl.grid.model import AlignedGrid
 from lfcl.noise.model import NoiseEstimate
 
 ADMM_METHODS = stress.ADMM_METHODS
@@ -67,7 +69,7 @@ def test_flat_saturated_and_defective_pixels(name, method):
     c = case("images", name)
     row = stress.run_case(c, method)
     assert_contract(row)
-    result = demosaic_lightfield(c.mosaic, c.pattern, c.pitch, method)
+    result = demosaic_grid(c.mosaic, c.pattern, AlignedGrid(c.pitch), method)
     assert np.isfinite(result.planes).all()
     if c.flat is not None:  # a flat input stays flat (Malvar keeps measured samples, TV of a constant is 0)
         np.testing.assert_allclose(result.planes, c.flat, atol=stress.FLAT_TOLERANCE, rtol=0)
@@ -83,9 +85,9 @@ def test_flat_saturated_and_defective_pixels(name, method):
 def test_non_finite_input_is_a_value_error(name, method):
     c = case("input", name)
     with pytest.raises(ValueError, match="NaN or Inf"):
-        demosaic_lightfield(c.mosaic, c.pattern, c.pitch, method)
+        demosaic_grid(c.mosaic, c.pattern, AlignedGrid(c.pitch), method)
     with pytest.raises(ValueError, match="NaN or Inf"):
-        demosaic_lightfield(c.mosaic, c.pattern, c.pitch, method, lam=0.01, rho=1.0, iterations=3, noise=NOISE)
+        demosaic_grid(c.mosaic, c.pattern, AlignedGrid(c.pitch), method, lam=0.01, rho=1.0, iterations=3, noise=NOISE)
     assert_contract(stress.run_case(c, method, repeat=False))
 
 
@@ -95,14 +97,14 @@ def test_admm_overflow_is_a_clear_floating_point_error(method):
     # a FloatingPointError naming the iteration, not return NaN/Inf.
     c = case("input", "one pixel at 3e38")
     with pytest.raises((FloatingPointError, ValueError), match=r"iteration 1|overflow|range|NaN|Inf"):
-        demosaic_lightfield(c.mosaic, c.pattern, c.pitch, method, noise=NOISE)
+        demosaic_grid(c.mosaic, c.pattern, AlignedGrid(c.pitch), method, noise=NOISE)
     assert_contract(stress.run_case(c, method, repeat=False))
 
 
 def test_malvar_never_returns_inf_for_finite_input():
     c = case("input", "one pixel at 3e38")
     try:
-        result = demosaic_lightfield(c.mosaic, c.pattern, c.pitch, "malvar")
+        result = demosaic_grid(c.mosaic, c.pattern, AlignedGrid(c.pitch), "malvar")
     except (ValueError, FloatingPointError):
         return
     assert np.isfinite(result.planes).all(), "silent Inf in the Malvar output"
@@ -118,7 +120,7 @@ def test_huge_finite_scene_gives_a_result_or_a_clear_error(method):
 def test_bad_parameters_are_value_errors(name, method):
     c = case("params", name)
     with pytest.raises(ValueError, match=c.error_match):
-        demosaic_lightfield(c.mosaic, c.pattern, c.pitch, method, **c.kwargs)
+        demosaic_grid(c.mosaic, c.pattern, AlignedGrid(c.pitch), method, **c.kwargs)
 
 
 # --------------------------------------------------------------------------- divergence is detected
@@ -173,13 +175,13 @@ def test_one_lens_without_noise_profile_is_a_clear_error_with_defaults():
     c = case("shape", "1x1 lenses, no noise profile, defaults")
     for method in ADMM_METHODS:
         with pytest.raises(ValueError, match="estimate the noise"):
-            demosaic_lightfield(c.mosaic, c.pattern, c.pitch, method)
+            demosaic_grid(c.mosaic, c.pattern, AlignedGrid(c.pitch), method)
 
 
 @pytest.mark.parametrize("method", ADMM_METHODS)
 def test_explicit_lambda_and_iterations_need_no_noise_estimate(method):
     c = case("shape", "1x1 lenses, no noise profile, lam+iterations")
-    result = demosaic_lightfield(c.mosaic, c.pattern, c.pitch, method, **c.kwargs)
+    result = demosaic_grid(c.mosaic, c.pattern, AlignedGrid(c.pitch), method, **c.kwargs)
     assert np.isfinite(result.planes).all() and result.iterations == c.kwargs["iterations"]
 
 
@@ -319,12 +321,12 @@ def test_tolerances_are_stated_and_tiered():
 @pytest.mark.parametrize("method", METHODS)
 def test_same_input_same_bytes(method):
     c = case("noise", f"{stress.EXTREME_LUX:g} lux")
-    first = demosaic_lightfield(c.mosaic, c.pattern, c.pitch, method)
-    second = demosaic_lightfield(c.mosaic, c.pattern, c.pitch, method)
+    first = demosaic_grid(c.mosaic, c.pattern, AlignedGrid(c.pitch), method)
+    second = demosaic_grid(c.mosaic, c.pattern, AlignedGrid(c.pitch), method)
     assert first.planes.tobytes() == second.planes.tobytes()
     assert first.history == second.history and first.iterations == second.iterations
     if method != "malvar":  # and with explicit, strong parameters (many soft-threshold decisions)
-        runs = [demosaic_lightfield(c.mosaic, c.pattern, c.pitch, method, lam=1.0, rho=100.0, iterations=15)
+        runs = [demosaic_grid(c.mosaic, c.pattern, AlignedGrid(c.pitch), method, lam=1.0, rho=100.0, iterations=15)
                 for _ in range(2)]
         assert runs[0].planes.tobytes() == runs[1].planes.tobytes()
         assert runs[0].history == runs[1].history

@@ -71,10 +71,11 @@ def _warm_up(device, method: str, pitch: int) -> None:
     """A demosaic of 4x4 lenses: compiles every program ``method`` uses at ``pitch``."""
     import numpy as np
 
-    from ..demosaic.methods import demosaic_lightfield
+    from ..demosaic.driver import demosaic_grid
+    from ..grid.model import AlignedGrid
 
     mosaic = np.random.default_rng(0).uniform(0.2, 0.8, (4 * pitch, 4 * pitch)).astype(np.float32)
-    demosaic_lightfield(mosaic, "GRBG", (pitch, pitch), method, lam=0.01, iterations=1, device=device)
+    demosaic_grid(mosaic, "GRBG", AlignedGrid((pitch, pitch)), method, lam=0.01, iterations=1, device=device)
 
 
 def worker_info(dask_worker, device=None) -> dict:

@@ -7,7 +7,7 @@ the centre view, PSNR of the mean image), with two peers timed in the same run:
 * ``malvar``, ``linear4d``: lfcl's OpenCL Malvar-He-Cutler and learned 4D filter (one
   point each; no iterations);
 * ``admm-uv``, ``admm-st``, ``admm-uvst``, ... (any ADMM method, optionally ``NAME:START``,
-  e.g. ``admm-uv-xc:linear4d``): ``lfcl.demosaic.methods.demosaic_lightfield`` with
+  e.g. ``admm-uv-xc:linear4d``): ``lfcl.demosaic.driver.demosaic_grid`` with
   ``iterations=k`` (no early stop), the noise level from the capture's DNG noise
   profile as ``lfcl.evaluation.evaluate.run_method`` does;
 * ``colour-demosaicing Malvar2004``: ``demosaicing_CFA_Bayer_Malvar2004`` on the
@@ -34,9 +34,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..demosaic.methods import ADMM_DEFAULTS, STARTS, admm_params, demosaic_lightfield
+from ..demosaic.driver import demosaic_grid
+from ..demosaic.methods import ADMM_DEFAULTS, STARTS, admm_params
 from ..evaluation.evaluate import Capture, capture_in_memory, load_capture
 from ..evaluation.metrics import lightfield_scores
+from ..grid.model import AlignedGrid
 from ..layout import LightFieldShape, planes_to_exchange
 from .timing import format_table, time_calls
 
@@ -113,7 +115,7 @@ def run(capture: Capture, budgets, reference_budgets=None, methods=ADMM_METHODS,
 
     ``reference_budgets``: budgets for the numpy reference ADMM (None: those of
     ``budgets`` up to 10; empty: skip it). ``progress(label)`` is called before
-    each point. ``skip_flat``: as ``demosaic_lightfield``'s (None: each method's default,
+    each point. ``skip_flat``: as ``demosaic_grid``'s (None: each method's default,
     which for admm-uv and admm-uv-xc leaves flat lenses out; False: every lens solved,
     like the numpy reference).
     """
@@ -144,9 +146,9 @@ def run(capture: Capture, budgets, reference_budgets=None, methods=ADMM_METHODS,
 
     def lfcl_method(label, iterations=None):
         method, _, start = label.partition(":")
-        return demosaic_lightfield(mosaic, pattern, pitch, method, iterations=iterations,
-                                   noise=None if method == "malvar" else noise, device=device, start=start or None,
-                                   skip_flat=skip_flat if iterations is not None else None)
+        return demosaic_grid(mosaic, pattern, AlignedGrid(pitch), method, iterations=iterations,
+                             noise=None if method == "malvar" else noise, device=device, start=start or None,
+                             skip_flat=skip_flat if iterations is not None else None)
 
     points = []
     # the direct methods: warm-up (program build), then timed

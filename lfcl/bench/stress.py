@@ -1,7 +1,7 @@
 """The numerical stress suite (``lfcl bench stress``): every method on inputs chosen to break it.
 
 Repository issue "Robustness", item 1. Each *case* is a mosaic (with its pattern,
-pitch and keyword arguments for :func:`lfcl.demosaic.methods.demosaic_lightfield`) that one
+pitch and keyword arguments for :func:`lfcl.demosaic.driver.demosaic_grid`) that one
 or more methods process twice; each (case, method) pair gives one row:
 
 * ``outcome``: ``ok``, or the exception's type (its message in ``message``);
@@ -28,7 +28,7 @@ Cases (S x T lenses of 9 x 9 pixels, the simulated ``charts`` scene at 12 lux,
 GRBG, seed 0, unless said):
 
 * ``grid``: lambda in 1e-6..1e2 x rho in 1e-4..1e3, 10 iterations, every ADMM method,
-  through ``demosaic_lightfield(lam=, rho=, iterations=)``;
+  through ``demosaic_grid(lam=, rho=, iterations=)``;
 * ``images``: all 0, all 1 (saturated), constant 0.37, hot and dead pixels;
 * ``input``: a NaN, +Inf or -Inf pixel and an all-NaN mosaic (must be a ValueError);
   one pixel at 3e38 and the whole scene times 1e30 (finite float32 that overflows
@@ -46,7 +46,7 @@ GRBG, seed 0, unless said):
   and a 16-bit DNG with every pixel at 65535 (at least 3x3 lenses: LibRaw refuses
   raws under 22 pixels a side);
 * ``noise``: extreme noise, the scene at 0.05 lux, all defaults;
-* ``weights``: a white-image lens response (``demosaic_lightfield(lens_response=)``):
+* ``weights``: a white-image lens response (``AlignedGrid(lens_response=)``, Case.grid):
   a vignetted disc whose corners fall below the flat-field threshold, and one with a
   single usable pixel per lens (every other pixel left out of the data term).
 
@@ -67,7 +67,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..demosaic.methods import ADMM_DEFAULTS, METHODS, admm_params, demosaic_lightfield
+from ..demosaic.driver import demosaic_grid
+from ..demosaic.methods import ADMM_DEFAULTS, METHODS, admm_params
+from ..grid.model import AlignedGrid
 from .timing import format_table
 
 ADMM_METHODS = tuple(ADMM_DEFAULTS)
@@ -101,12 +103,20 @@ class Case:
     pattern: str
     pitch: tuple[int, int]
     methods: tuple[str, ...] = METHODS
-    kwargs: dict = dataclasses.field(default_factory=dict)  # for demosaic_lightfield
+    kwargs: dict = dataclasses.field(default_factory=dict)  # for demosaic_grid (lens_response: the grid's)
     expect: str = "ok"  # "ok", "error" (a ValueError/FloatingPointError) or "either"
     error_match: str | None = None  # regex an expected error's message must match
     refusable: tuple[str, ...] = ()  # methods that may refuse it with a ValueError where "ok" is expected
     flat: float | None = None  # the output must equal this everywhere (within FLAT_TOLERANCE)
     note: str = ""
+
+    def grid(self) -> AlignedGrid:
+        """The input's lens grid (lfcl.grid.model): ``pitch``, and ``kwargs``' ``lens_response`` if it has one."""
+        return AlignedGrid(self.pitch, lens_response=self.kwargs.get("lens_response"))
+
+    def options(self) -> dict:
+        """``kwargs`` less the grid's ``lens_response``: the keyword arguments of demosaic_grid."""
+        return {k: v for k, v in self.kwargs.items() if k != "lens_response"}
 
 
 def _noise_of(sensor, mosaic):
@@ -355,7 +365,7 @@ def _attempt(case: Case, method: str, device):
                                        noise=case.kwargs.get("noise"))
             result = _DepthResult(np.stack([depth.disparity, depth.confidence]), [])
         else:
-            result = demosaic_lightfield(case.mosaic, case.pattern, case.pitch, method, device=device, **case.kwargs)
+            result = demosaic_grid(case.mosaic, case.pattern, case.grid(), method, device=device, **case.options())
     except Exception as exc:
         return None, exc, time.perf_counter() - start
     return result, None, time.perf_counter() - start

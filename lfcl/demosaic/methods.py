@@ -1,4 +1,8 @@
-"""The demosaic/denoise methods and their defaults: one place for both.
+"""The demosaic/denoise methods and their defaults, and the solver of aligned grids.
+
+The entry point for every grid is lfcl.demosaic.driver.demosaic_grid: it checks the input, resolves
+``auto`` and runs :func:`solve_aligned` (an aligned square grid of integer pitch, sliced exactly) or
+lfcl.demosaic.resampled.solve_resampled, then the safety net where it applies.
 
 ``malvar``     2D Malvar-He-Cutler on the whole lenslet mosaic (the paper's baseline).
 ``admm-uv``    ADMM-TV with the prior over (u, v): within each microlens.
@@ -27,6 +31,7 @@ for scenes that want more or less smoothing.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 
@@ -34,6 +39,7 @@ import numpy as np
 
 from ..device import get_runtime
 from ..grid.vignetting import flat_field
+from ..layout import LightFieldShape, planes_to_exchange
 from ..noise.model import NoiseEstimate, estimate_noise
 from ..ops.flatlens import LensFlatness
 from ..ops.lenscopy import LensCopy
@@ -42,7 +48,7 @@ from ..ops.reduce import Reductions
 from ..solvers.admm import AdmmSolver, solver_bytes, solver_largest_buffer
 from ..solvers.params import AdmmParams
 from .flat_lenses import FLAT_P, SKIPPABLE, fill_flat, flat_lenses, pack_lenses
-from .names import METHODS, STARTS
+from .names import METHODS, STARTS  # noqa: F401  (STARTS: re-exported for lfcl.pipeline.stages and lfcl.bench)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -143,6 +149,12 @@ def admm_params(method: str, sigma: float, *, lam=None, iterations=None, rho=Non
 
 @dataclasses.dataclass
 class DemosaicResult:
+    """What lfcl.demosaic.driver.demosaic_grid returns on either kind of grid.
+
+    ``planes`` [3, S*U, T*V] float32 (docs/layout.md) of a light field of ``shape``; :attr:`lightfield` is
+    the same in the exchange layout. ``sampling``: the resampled grid's SamplingModel (None: aligned).
+    """
+
     planes: np.ndarray  # [3, H, W] float32, docs/layout.md
     method: str
     parameters: dict
@@ -151,6 +163,13 @@ class DemosaicResult:
     stop_reason: str
     history: list
     noise: NoiseEstimate | None
+    shape: LightFieldShape | None = None
+    sampling: object = None  # lfcl.grid.resampling.SamplingModel of a resampled grid
+
+    @functools.cached_property
+    def lightfield(self) -> np.ndarray:
+        """``[S, T, U, V, 3]`` float32: the planes in the exchange layout (made on first use)."""
+        return planes_to_exchange(self.planes, self.shape)
 
 
 def _check_finite(planes: np.ndarray, what: str, mosaic: np.ndarray):
@@ -171,7 +190,7 @@ def lens_row_bands(lens_rows: int, per_row: tuple[int, int], limits: tuple[int, 
 
 
 def flat_threshold_for(method: str, skip_flat) -> float | None:
-    """The p threshold ``demosaic_lightfield(skip_flat=...)`` tests lenses with (None: no test).
+    """The p threshold ``demosaic_grid(skip_flat=...)`` tests lenses with (None: no test).
 
     None or False: off (the default: on fine texture off the focal plane the chi-square test took
     grain for noise and cost up to 5 dB, docs/auto.md); True: FLAT_P; a number in (0, 1): that
@@ -208,7 +227,7 @@ def _noise_model_or_why(noise, raw_mosaic, pattern, pitch, origin, asked) -> tup
     return (None, why) if why is not None else (noise, None)
 
 
-def _with_safety_net(result: DemosaicResult, mosaic, pattern, pitch, origin, lens_response, device) -> DemosaicResult:
+def with_safety_net(result: DemosaicResult, mosaic, pattern, pitch, origin, lens_response, device) -> DemosaicResult:
     """``result`` after the safety net (lfcl/demosaic/safety_net.py), on the mosaic the method saw."""
     from .safety_net import apply_safety_net
 
@@ -226,19 +245,19 @@ def _with_safety_net(result: DemosaicResult, mosaic, pattern, pitch, origin, len
                                seconds=result.seconds + time.perf_counter() - began, noise=noise)
 
 
-def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
-                        lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
-                        device=None, callback=None, max_memory: int | None = None,
-                        lens_response=None, tolerance_db: float | None = None,
-                        start: str | None = None, skip_flat: bool | float | None = None,
-                        auto_view: str = "both", safety_net: bool = True) -> DemosaicResult:
-    """Demosaic (and denoise) a normalised lenslet mosaic [H, W] into [3, H, W] planes.
+def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origin=(0, 0),
+                  lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
+                  device=None, callback=None, max_memory: int | None = None,
+                  lens_response=None, tolerance_db: float | None = None,
+                  start: str | None = None, skip_flat: bool | float | None = None) -> DemosaicResult:
+    """Demosaic (and denoise) a normalised lenslet mosaic [H, W] of an aligned grid into [3, H, W] planes.
 
-    H and W must be whole multiples of the pitch (crop first). ``noise`` defaults to
-    an estimate from the mosaic (used by the ADMM methods only). ``max_memory``
-    (bytes, default: 80 % of the device's global memory) bounds the solver's device
-    buffers: a larger admm-uv problem runs in bands of lens rows, which is exact
-    because the (u, v) prior couples no two lenses (each band stops on its own rule);
+    Called by lfcl.demosaic.driver.demosaic_grid, which has checked the input (H and W whole
+    multiples of the pitch, finite values, a known method and start) and resolved ``auto``; the
+    safety net is the driver's too. ``noise`` defaults to an estimate from the mosaic (used by
+    the ADMM methods only). ``max_memory`` (bytes, default: 80 % of the device's global memory)
+    bounds the solver's device buffers: a larger admm-uv problem runs in bands of lens rows, which
+    is exact because the (u, v) prior couples no two lenses (each band stops on its own rule);
     the other priors couple neighbouring lenses and say so instead.
     ``lens_response`` [U, V] (the white image's vignetting, lfcl/grid/vignetting.py):
     flat-field the mosaic, and for the ADMM methods weight the data term by the
@@ -252,48 +271,15 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
     lens, so that no filter mixes two micro-images; docs/auto.md) or ``"guarded"`` (linear4d, with
     Malvar in the lenses where the two disagree far more than in the rest of the frame: high-contrast
     edges and clipped highlights, where linear4d breaks; lfcl/demosaic/guarded_start.py, recorded in
-    ``parameters["start_guard"]``). ``auto`` takes the start its rule names.
-    ``auto_view`` (``auto`` only): the view its rule was judged on, ``"both"`` (the worse of
-    the centre view and the mean image), ``"center"`` or ``"mean"`` (lfcl.demosaic.auto.view_for_outputs:
-    a run that writes only that view).
+    ``parameters["start_guard"]``).
     ``skip_flat`` (admm-uv, admm-uv-xc): lenses that are flat within the noise (a chi-square
     test, lfcl/demosaic/flat_lenses.py) get their colour means and the solve runs on the others only,
     packed into a smaller mosaic; None or False: off (the default: the test took fine texture
     for noise, docs/auto.md), True: on at p threshold FLAT_P, a number: that p threshold.
     Recorded in ``parameters["flat_lenses"]``; ``callback``'s x is then the packed mosaic's.
-    ``safety_net`` (every method but Malvar; on by default): each lens's colour means are
-    soft-thresholded towards Malvar's at the noise of a lens mean (lfcl/demosaic/safety_net.py), so that no
-    lens's mean strays from Malvar's further than the noise explains; recorded in
-    ``parameters["safety_net"]``.
     """
-    method = parse_method(method)
     mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
-    if mosaic.ndim != 2:
-        raise ValueError(f"mosaic must be 2D [H, W], got shape {mosaic.shape}")
     U, V = pitch
-    if mosaic.shape[0] % U or mosaic.shape[1] % V:
-        raise ValueError(f"mosaic {mosaic.shape[0]}x{mosaic.shape[1]} is not a whole number of {U}x{V} lenses")
-    if not np.all(np.isfinite(mosaic)):
-        raise ValueError("mosaic holds NaN or Inf values")
-    if start not in (None, *STARTS):
-        raise ValueError(f"start must be one of {', '.join(STARTS)}, got {start!r}")
-    if method == "auto":  # choose the method and strength from the noise level (lfcl/demosaic/auto.py), then run it
-        from .auto import choose, for_pitch
-        from .lens_ratio import cross_lens_ratio
-
-        noise = noise if noise is not None else estimate_noise(mosaic, pattern, pitch, origin)
-        lens_ratio = cross_lens_ratio(mosaic, pitch, noise, lens_response)  # is the content like the training's?
-        choice, replaced = for_pitch(choose(noise.sigma, lens_ratio=lens_ratio, view=auto_view), pitch)
-        result = demosaic_lightfield(mosaic, pattern, pitch, choice.method, origin=origin, lam=lam,
-                                     iterations=iterations, rho=rho, strength=strength * choice.strength,
-                                     noise=noise, device=device, callback=callback, max_memory=max_memory,
-                                     lens_response=lens_response, tolerance_db=tolerance_db,
-                                     start=start if start is not None else choice.start,
-                                     skip_flat=skip_flat if choice.method in SKIPPABLE else None,
-                                     safety_net=safety_net)
-        result.parameters = {**result.parameters, "auto": {**choice.as_dict(),
-                                                           **({"replaced": replaced} if replaced else {})}}
-        return result
     flat_threshold = flat_threshold_for(method, skip_flat)
     raw_mosaic, lens_weights = mosaic, None
     if lens_response is not None:
@@ -306,9 +292,7 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
         planes = linear4d(runtime, mosaic, pattern, pitch, origin, noise)
         _check_finite(planes, "linear4d", mosaic)
-        result = DemosaicResult(planes, method, {}, 0, time.perf_counter() - began, "direct", [], noise)
-        return _with_safety_net(result, raw_mosaic, pattern, pitch, origin, lens_response, device) if safety_net \
-            else result
+        return DemosaicResult(planes, method, {}, 0, time.perf_counter() - began, "direct", [], noise)
     b = runtime.to_device(mosaic)
     epi_start_replaced = None
     # admm-epi's start follows the noise (lfcl/solvers/epi.py EPI_SCHEDULE), unless lam and iterations are given
@@ -383,10 +367,8 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
             parameters["start_replaced"] = epi_start_replaced
         if guard is not None:
             parameters["start_guard"] = guard
-        result = DemosaicResult(planes, method, parameters, run.iterations, time.perf_counter() - began,
-                                run.stop_reason, [dict(dataclasses.asdict(r), band=0) for r in run.history], noise)
-        return _with_safety_net(result, raw_mosaic, pattern, pitch, origin, lens_response, device) if safety_net \
-            else result
+        return DemosaicResult(planes, method, parameters, run.iterations, time.perf_counter() - began,
+                              run.stop_reason, run.history_rows(), noise)
     budget = int(max_memory) if max_memory is not None else int(0.8 * runtime.device.global_mem_size)
     needed = solver_bytes((H, W), dims, exact=dims == "uv", cross_channel=params.cross_channel)
     largest = solver_largest_buffer((H, W), dims)
@@ -465,9 +447,7 @@ def demosaic_lightfield(mosaic: np.ndarray, pattern: str, pitch, method: str, *,
         parameters["flat_lenses"] = found.as_dict(packing.grid[0] if packing is not None else None)
     elif dims == "uv":
         parameters["flat_lenses"] = {"flat_lenses": 0, "why": flat_why}
-    result = DemosaicResult(
+    return DemosaicResult(
         planes, method, parameters, max((run.iterations for run in runs), default=0), time.perf_counter() - began,
         reason, history, noise,
     )
-    return _with_safety_net(result, raw_mosaic, pattern, pitch, origin, lens_response, device) if safety_net \
-        else result

@@ -16,6 +16,10 @@ DEFAULT_METHOD = "auto"
 #: and the learned filter with Malvar in the lenses where the two disagree far more than elsewhere.
 STARTS = ("malvar", "linear4d", "lens-malvar", "guarded")
 
+#: The methods that run on a resampled lens grid (rotated, non-integer pitch, hexagonal; lfcl/demosaic/resampled.py):
+#: Malvar and the ADMM priors the resampled solver has (lfcl/solvers/resampled.py), from the Malvar start only.
+RESAMPLED_METHODS = ("malvar", "admm-uv", "admm-st", "admm-uvst")
+
 #: The methods whose prior couples no two lenses, so that flat lenses can leave the solve
 #: (lfcl/demosaic/flat_lenses.py), and the chi-square p-value above which a lens counts as flat.
 SKIPPABLE = ("admm-uv", "admm-uv-xc")

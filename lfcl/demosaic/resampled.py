@@ -1,7 +1,7 @@
-"""Demosaic a lenslet raw of any lens grid (rotated, non-integer pitch, hexagonal) into a regular light field.
+"""The solver of resampled lens grids (rotated, non-integer pitch, hexagonal): a regular light field from the raw.
 
-The entry point for grids that lfcl.demosaic.methods.demosaic_lightfield (aligned square
-grids of integer pitch, sliced exactly) does not take; docs/geometry.md.
+lfcl.demosaic.driver.demosaic_grid runs :func:`solve_resampled` for a :class:`lfcl.grid.model.ResampledGrid`
+(an aligned square grid of integer pitch is sliced exactly instead, lfcl/demosaic/methods.py); docs/geometry.md.
 
 ``malvar``     2D Malvar-He-Cutler on the flat-fielded sensor, then the resampling
                map ``M`` onto the regular light field (lfcl/grid/resampling.py).
@@ -9,8 +9,9 @@ grids of integer pitch, sliced exactly) does not take; docs/geometry.md.
 ``admm-st``    regular light field onto the measured sensor pixels, so the solver
 ``admm-uvst``  fits real sensor samples, never interpolated colours
                (lfcl/solvers/resampled.py). Starts from the malvar result.
-``auto``       lfcl.demosaic.auto.choose at the raw's noise level; a method the rule names that
-               does not run here (e.g. linear4d) becomes ``lfcl.demosaic.auto.AUTO_FALLBACK``.
+``auto``       resolved by the driver (lfcl.demosaic.driver.resolve_auto) at the sigma lambda uses here;
+               a method the rule names that does not run here (e.g. linear4d) becomes
+               ``lfcl.demosaic.auto.AUTO_FALLBACK``.
 
 Defaults follow lfcl.demosaic.methods.ADMM_DEFAULTS (lambda per sigma, the stopping rule)
 with the corrections of :data:`GRID_TUNING`, measured on resampled grids
@@ -19,10 +20,12 @@ with the corrections of :data:`GRID_TUNING`, measured on resampled grids
 Example::
 
     >>> import numpy as np
+    >>> from lfcl.demosaic.driver import demosaic_grid
+    >>> from lfcl.grid.model import ResampledGrid
     >>> from lfcl.sim.geometry import GridGeometry
     >>> geometry = GridGeometry((60, 60), "hex", 9.4, 0.7, (0.2, 0.1))
     >>> mosaic = (0.3 * geometry.white_expected("GRBG", 1.0)).astype(np.float32)
-    >>> result = demosaic_resampled(mosaic, "GRBG", geometry, "malvar")
+    >>> result = demosaic_grid(mosaic, "GRBG", ResampledGrid.of(geometry, "GRBG"), "malvar")
     >>> result.lightfield.shape[2:]
     (9, 9, 3)
 """
@@ -35,14 +38,9 @@ import time
 
 import numpy as np
 
-from ..grid.resampling import SamplingModel, sampling_model
-from ..layout import parse_pattern, planes_to_exchange
+from ..grid.resampling import SamplingModel
 from ..noise.model import NoiseEstimate
-from .methods import ADMM_DEFAULTS, DemosaicResult, admm_params, change_for_tolerance_db
-
-GRID_METHODS = ("malvar", "admm-uv", "admm-st", "admm-uvst")
-#: The method names demosaic_resampled takes: the methods and ``auto``.
-GRID_METHOD_NAMES = ("auto", *GRID_METHODS)
+from .methods import ADMM_DEFAULTS, DemosaicResult, admm_params
 
 # CG steps per ADMM iteration (the aligned admm-uv solves its x-update exactly; here
 # A^T W A differs from lens to lens, so CG it is). See docs/geometry.md for the measurement.
@@ -72,23 +70,6 @@ GRID_TUNING = {
 }
 
 
-@dataclasses.dataclass
-class GridDemosaicResult(DemosaicResult):
-    """:class:`lfcl.demosaic.methods.DemosaicResult` (``planes`` [3, S*U, T*V]) plus the exchange light field."""
-
-    lightfield: np.ndarray | None = None  # [S, T, U, V, 3] float32
-    sampling: SamplingModel | None = None
-
-
-def _check_mosaic(mosaic) -> np.ndarray:
-    mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
-    if mosaic.ndim != 2:
-        raise ValueError(f"mosaic must be 2D [H, W], got shape {mosaic.shape}")
-    if not np.all(np.isfinite(mosaic)):
-        raise ValueError("mosaic holds NaN or Inf values")
-    return mosaic
-
-
 def resample_start(runtime, sampling: SamplingModel, mosaic: np.ndarray):
     """The malvar result on the device: Malvar of the flat-fielded sensor, resampled (planes [3, S*U, T*V])."""
     from ..ops.malvar import Malvar
@@ -101,81 +82,47 @@ def resample_start(runtime, sampling: SamplingModel, mosaic: np.ndarray):
     return resample.forward(sensor)
 
 
-def demosaic_resampled(mosaic: np.ndarray, pattern: str | None, geometry, method: str, *, views=None,
-                       threshold: float | None = None, lenses=None, lam=None, iterations=None, rho=None,
-                       strength: float = 1.0, cg_steps: int | None = None, interpolation_weight: float | None = None,
-                       noise: NoiseEstimate | None = None, device=None, callback=None,
-                       max_memory: int | None = None, tolerance_db: float | None = None,
-                       auto_view: str = "both") -> GridDemosaicResult:
-    """Demosaic (and denoise) a normalised lenslet raw ``mosaic`` [H, W] of any lens grid.
+def solve_resampled(mosaic: np.ndarray, sampling: SamplingModel, method: str, *, lam=None, iterations=None,
+                    rho=None, strength: float = 1.0, cg_steps: int | None = None,
+                    interpolation_weight: float | None = None, noise: NoiseEstimate | None = None, device=None,
+                    callback=None, max_memory: int | None = None, tolerance_db: float | None = None
+                    ) -> DemosaicResult:
+    """Demosaic (and denoise) a normalised lenslet raw ``mosaic`` [H, W] of the lens grid of ``sampling``.
 
-    ``geometry``: a :class:`lfcl.grid.Calibration` (its grid and white-image
-    weights), a :class:`lfcl.sim.geometry.GridGeometry`, or a ready
-    :class:`lfcl.grid.resampling.SamplingModel`; ``views``, ``threshold``, ``lenses``
-    are passed to :func:`lfcl.grid.resampling.sampling_model`. ``mosaic`` is the whole
-    sensor (the calibration's ``sensor_shape``), ``(raw - black) / (white - black)``,
-    not flat-fielded (this function divides by the white response). ``pattern``:
-    the raw's Bayer pattern (None: the calibration's).
+    Called by lfcl.demosaic.driver.demosaic_grid, which has checked the input (the whole sensor,
+    ``sampling.sensor_shape``, finite; a method of :data:`lfcl.demosaic.names.RESAMPLED_METHODS`) and resolved
+    ``auto``. ``mosaic`` is ``(raw - black) / (white - black)``, not flat-fielded (this function divides by
+    the white response).
 
     ``noise``: the raw's noise model (e.g. ``lfcl.noise.model.from_noise_profile``);
     lambda uses its sigma *at the mean level of the measured pixels*
     (``noise.sigma_at``), whatever level it was made for. None: estimated from the
-    raw (lfcl/noise/resampled.py). ``lam``, ``iterations``, ``rho``, ``strength`` as in
-    lfcl.demosaic.methods.demosaic_lightfield (``strength`` multiplies the grid default of
-    :data:`GRID_TUNING`); ``cg_steps`` (default :data:`GRID_CG_STEPS`);
-    ``interpolation_weight`` (:meth:`lfcl.grid.resampling.SamplingModel.data`; default from
-    :data:`GRID_TUNING`).
+    raw (lfcl/noise/resampled.py). ``lam``, ``iterations``, ``rho``, ``strength`` as on aligned grids
+    (``strength`` multiplies the grid default of :data:`GRID_TUNING`); ``cg_steps`` (default
+    :data:`GRID_CG_STEPS`); ``interpolation_weight`` (:meth:`lfcl.grid.resampling.SamplingModel.data`; default
+    from :data:`GRID_TUNING`).
     ``callback(record, x)`` after every ADMM iteration. ``max_memory`` bytes
     (default 80 % of the device's): a larger problem is a ``ValueError`` (no bands yet).
     ``tolerance_db``: stop once an iteration can move PSNR by less than this many dB
     (lfcl.demosaic.methods.admm_params, docs/auto.md) instead of the grid's stopping rule (the
     :data:`GRID_TUNING` change factor then does not apply); ignored by malvar.
 
-    ``method="auto"``: :func:`lfcl.demosaic.auto.choose` at ``noise.sigma_at`` the mean level of
-    the measured pixels (the sigma lambda uses), then that method with ``strength``
-    times the chosen strength; a method not in :data:`GRID_METHODS` becomes
-    ``lfcl.demosaic.auto.AUTO_FALLBACK`` at strength 1 and the reason says so. The choice goes into
-    ``parameters["auto"]`` (``method``, ``strength``, ``sigma``, ``reason``; plus
-    ``replaced`` = the rule's own ``{"method", "strength"}`` when it fell back). ``auto_view``: the
-    view the rule was judged on (lfcl.demosaic.auto.VIEWS, as in lfcl.demosaic.methods.demosaic_lightfield).
-
-    Returns a :class:`GridDemosaicResult`: ``planes`` [3, S*U, T*V] and
-    ``lightfield`` [S, T, U, V, 3] float32, ``sampling`` (its ``as_meta()`` for
-    metadata), and the fields of :class:`lfcl.demosaic.methods.DemosaicResult`.
+    Returns a :class:`lfcl.demosaic.methods.DemosaicResult`: ``planes`` [3, S*U, T*V] (``lightfield``
+    [S, T, U, V, 3] float32) and ``sampling`` (its ``as_meta()`` for metadata).
     """
     from ..device import get_runtime
     from ..ops.reduce import Reductions
 
-    if method not in GRID_METHOD_NAMES:
-        raise ValueError(f"method {method!r} is not available for rotated, non-integer-pitch or hexagonal lens "
-                         f"grids: use one of {', '.join(GRID_METHOD_NAMES)}")
-    if tolerance_db is not None:
-        change_for_tolerance_db(tolerance_db)  # a bad tolerance: one line now, before any work
-    mosaic = _check_mosaic(mosaic)
-    if isinstance(geometry, SamplingModel):
-        sampling = geometry
-        if pattern is not None and parse_pattern(pattern) != sampling.pattern:
-            raise ValueError(f"the raw is {parse_pattern(pattern)} but the sampling model is for {sampling.pattern}")
-    else:
-        sampling = sampling_model(geometry, pattern, views=views, threshold=threshold, lenses=lenses)
-    if mosaic.shape != sampling.sensor_shape:
-        H, W = sampling.sensor_shape
-        raise ValueError(f"the lens grid is for a {H}x{W} sensor but the raw is {mosaic.shape[0]}x{mosaic.shape[1]}")
-    if method == "auto":
-        return _auto(mosaic, sampling, noise, lam=lam, iterations=iterations, rho=rho, strength=strength,
-                     cg_steps=cg_steps, interpolation_weight=interpolation_weight, device=device, callback=callback,
-                     max_memory=max_memory, tolerance_db=tolerance_db, auto_view=auto_view)
     runtime = get_runtime(device)
     start = time.perf_counter()
     x0 = resample_start(runtime, sampling, mosaic)
     shape = sampling.shape
     if method == "malvar":
         planes = _finite(x0.get(), "malvar", mosaic)
-        return GridDemosaicResult(planes, method, {}, 0, time.perf_counter() - start, "direct", [], None,
-                                  planes_to_exchange(planes, shape), sampling)
+        return DemosaicResult(planes, method, {}, 0, time.perf_counter() - start, "direct", [], None, shape, sampling)
     if not math.isfinite(Reductions(runtime).abs_sum(x0)):
         _finite(np.array([np.inf]), "the Malvar start", mosaic)
-    pixels, level = _measured(sampling, mosaic)
+    pixels, level = measured(sampling, mosaic)
     defaults = ADMM_DEFAULTS[method]
     if noise is None and (lam is None or tolerance_db is not None
                           or (iterations is None and defaults.change_per_sigma > 0)):
@@ -205,38 +152,16 @@ def demosaic_resampled(mosaic: np.ndarray, pattern: str | None, geometry, method
     history = [dict(dataclasses.asdict(r), band=0) for r in result.history]
     parameters = {**dataclasses.asdict(params), "sigma": sigma, "interpolation_weight": interpolation_weight,
                   "start": "malvar"}  # the resampled path starts from Malvar (2D), then resampled
-    return GridDemosaicResult(planes, method, parameters, result.iterations, time.perf_counter() - start,
-                              result.stop_reason, history, noise, planes_to_exchange(planes, shape), sampling)
+    return DemosaicResult(planes, method, parameters, result.iterations, time.perf_counter() - start,
+                          result.stop_reason, history, noise, shape, sampling)
 
 
-def _measured(sampling: SamplingModel, mosaic: np.ndarray):
+def measured(sampling: SamplingModel, mosaic: np.ndarray):
     """The data term's pixels and their mean raw level (the level sigma is taken at)."""
     pixels = sampling.measured_pixels()
     if pixels.size == 0:
         raise ValueError("no sensor pixel is bright enough in the white image to measure the light field")
     return pixels, float(np.mean(mosaic.ravel()[pixels], dtype=np.float64))
-
-
-def _auto(mosaic, sampling: SamplingModel, noise, *, strength, auto_view="both", **options) -> GridDemosaicResult:
-    """``method="auto"`` (see :func:`demosaic_resampled`): choose at the solver's sigma, then run the choice."""
-    from .auto import AUTO_FALLBACK, choose, replacement
-
-    if noise is None:
-        from ..noise.resampled import estimate_grid_noise
-
-        noise = estimate_grid_noise(mosaic, sampling)
-    choice = choose(noise.sigma_at(_measured(sampling, mosaic)[1]), view=auto_view)
-    ran, replaced = choice, None
-    if choice.method not in GRID_METHODS or choice.start != "malvar":
-        what = choice.method if choice.method not in GRID_METHODS else f"{choice.method} from a {choice.start} start"
-        ran, replaced = replacement(choice, f"{what} does not run on resampled lens grids", AUTO_FALLBACK, 1.0)
-    result = demosaic_resampled(mosaic, None, sampling, ran.method, strength=strength * ran.strength, noise=noise,
-                                **options)
-    auto = ran.as_dict()
-    if replaced:
-        auto["replaced"] = replaced
-    result.parameters = {**result.parameters, "auto": auto}
-    return result
 
 
 def _finite(planes: np.ndarray, what: str, mosaic: np.ndarray) -> np.ndarray:

@@ -18,7 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..demosaic.methods import METHODS, demosaic_lightfield, parse_method
+from ..demosaic.driver import demosaic_grid
+from ..demosaic.methods import METHODS, parse_method
+from ..grid.model import AlignedGrid
 from ..io.raw import read_mosaic
 from ..layout import DIMS, LightFieldShape, planes_to_exchange
 from . import plots
@@ -65,8 +67,8 @@ def run_method(capture: Capture, method: str, device=None, **overrides) -> dict:
     noise = None
     if capture.noise_profile is not None and method != "malvar":
         noise = from_noise_profile(capture.noise_profile, capture.mosaic)
-    result = demosaic_lightfield(capture.mosaic, capture.pattern, capture.pitch, method, device=device,
-                                 noise=noise, **overrides)
+    result = demosaic_grid(capture.mosaic, capture.pattern, AlignedGrid(capture.pitch), method, device=device,
+                           noise=noise, **overrides)
     lightfield = planes_to_exchange(result.planes, LightFieldShape.from_exchange(capture.truth))
     return {
         "method": label,

@@ -5,6 +5,7 @@
 * :mod:`~lfcl.grid.estimate`     estimation from a white image (:func:`calibrate_array`, :func:`calibrate_white`)
 * :mod:`~lfcl.grid.files`        ``cal.json`` read (validated) / write, the lens-centre CSV
 * :mod:`~lfcl.grid.aligned`      which path a grid takes: exact slicing (aligned square) or resampling
+* :mod:`~lfcl.grid.model`        the typed grid the demosaic takes: :class:`AlignedGrid`, :class:`ResampledGrid`
 * :mod:`~lfcl.grid.resampling`   the sampling model of any grid: regular light field <-> sensor pixels
 * :mod:`~lfcl.grid.vignetting`   the white response: flat-fielding and the data-term weights
 

@@ -19,10 +19,10 @@
 #define CROSS_CHANNEL 0
 #endif
 //
-// PRIOR_MASK (build-time, 0 or 1; common.cl LINK, LAPLACIAN): the prior keeps only the
-// differences whose two samples have lens weight > 0, K = M [D; D C] (`links`, the host's
-// table of them), so a pixel of weight 0 has neither data nor prior: its row of M is zero and
-// the solvers leave it unchanged. Without PRIOR_MASK `links` is unused.
+// PRIOR_MASK (build-time, 1 when some lens weight is 0; common.cl LINK, LAPLACIAN): the prior
+// keeps only the differences whose two samples have lens weight > 0, K = M [D; D C] (`links`,
+// the host's table of them), so a pixel of weight 0 has neither data nor prior: its row of M is
+// zero and the solvers leave it unchanged. Without PRIOR_MASK `links` is unused.
 
 // The data-term weights of 16 columns of one row. `weight_runs` tabulates them for every lens
 // row u and column phase p = col0 % V (the host's lens weights w[u][v] repeated along the row):

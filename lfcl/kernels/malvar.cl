@@ -18,8 +18,13 @@
 // lens_u x lens_v pixels is treated as an image of its own; H and W are whole lenses).
 // lens_u = lens_v = 0: the whole sensor is one image (the paper's Malvar).
 //
-// Input: mosaic [H, W] float32. Output: planes [3, H, W] float32 (R, G, B).
-// Global size: (W, H); work-items past the image return.
+// Input: mosaic [H, W] float32. Output: planes [3, H, W] float32 (R, G, B), or, built with
+// -DINTERLEAVED=1, an image [H, W, 3] (the public lfcl.malvar's layout: no transpose on the host).
+// Global size: (W, H), or a band of rows through the global offset; work-items past the image return.
+
+#ifndef INTERLEAVED
+#define INTERLEAVED 0
+#endif
 
 // Mirror index i into [0, n): fold with period 2(n-1) (numpy pad 'reflect').
 inline int mirror_index(int i, int n)
@@ -155,9 +160,15 @@ __kernel void malvar(__global const float *mosaic, __global float *planes,
         blue = own == 2 ? p.C : other;
     }
 
-    const size_t plane = (size_t)height * width;
     const size_t i = (size_t)row * width + col;
+#if INTERLEAVED
+    planes[3 * i] = red;
+    planes[3 * i + 1] = green;
+    planes[3 * i + 2] = blue;
+#else
+    const size_t plane = (size_t)height * width;
     planes[i] = red;
     planes[plane + i] = green;
     planes[2 * plane + i] = blue;
+#endif
 }

@@ -4,9 +4,7 @@ Arrays are stacks of sensor-shaped planes, ``[..., S*U, T*V]`` (docs/layout.md):
 colour planes, the gradient blocks ``[k, C, H, W]`` or a mosaic ``[H, W]``. A pair
 ``(i, j)`` copies lens ``i = s * T + t`` of the source to lens ``j`` of the destination,
 in every plane; a pair ``(-1, j)`` sets lens ``j`` to zero; lenses no pair names keep their
-values. lfcl/solvers/freeze.py uses it
-to move the lenses still being solved into a smaller solver and back, lfcl/demosaic/methods.py to pack the
-lenses that are not flat into a smaller solver and to put them back (lfcl/demosaic/flat_lenses.py), where
+values. lfcl/demosaic/methods.py uses it to pack the lenses that are not flat into a smaller solver and to put them back (lfcl/demosaic/flat_lenses.py), where
 ``fill_lenses`` gives the flat ones their colour means.
 
 Example::

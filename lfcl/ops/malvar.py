@@ -39,6 +39,8 @@ Example::
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from ..layout import packed_pattern, parse_pattern, pattern_channels
@@ -132,16 +134,83 @@ class Malvar:
         self.pattern = packed_pattern(pattern, origin)
         self.mosaic_shape = (self.height, self.width)
         self.planes_shape = (3, self.height, self.width)
+        self.image_shape = (self.height, self.width, 3)
+
+    def _args(self, mosaic_data, out_data):
+        return (mosaic_data, out_data, np.int32(self.height), np.int32(self.width), self.pattern,
+                np.int32(self.lens[0]), np.int32(self.lens[1]))
 
     def forward(self, mosaic, out=None):
         """``[H, W]`` float32 mosaic -> ``[3, H, W]`` float32 planes (into ``out`` if given)."""
         check_device_array(mosaic, self.mosaic_shape, "mosaic")
         out = output(self.runtime, out, self.planes_shape)
-        self.runtime.launch(
-            "malvar", "malvar", (self.width, self.height), mosaic.data, out.data,
-            np.int32(self.height), np.int32(self.width), self.pattern, np.int32(self.lens[0]), np.int32(self.lens[1]),
-        )
+        self.runtime.launch("malvar", "malvar", (self.width, self.height), *self._args(mosaic.data, out.data))
         return out
+
+    def image_rows(self, queue, mosaic_buffer, image_buffer, rows: tuple[int, int], wait_for=None):
+        """Enqueue the rows ``[r0, r1)`` of the ``(H, W, 3)`` image on ``queue`` (device buffers of the whole
+        mosaic and image; the filters read rows r0 - 2 .. r1 + 1, which must be on the device)."""
+        r0, r1 = rows
+        kernel = self.runtime.kernel("malvar", "malvar", defines=(("INTERLEAVED", 1),))
+        return kernel(queue, (self.width, r1 - r0), None, *self._args(mosaic_buffer, image_buffer),
+                      global_offset=(0, r0), wait_for=wait_for)
+
+
+#: Rows per band of the streamed public call on a GPU: upload, filters and download of successive bands
+#: overlap (BENCHMARKS.md, "lfcl bench api" on a GPU).
+STREAM_ROWS = 512
+
+
+def row_bands(height: int, rows: int) -> list[tuple[int, int]]:
+    """``[r0, r1)`` bands of ``rows`` rows covering ``height`` (the last takes up to ``rows + 1``), none shorter
+    than 2 rows unless the image is (the filters' reach), so that a band's halo lies in its two neighbours."""
+    if rows < 2:
+        raise ValueError(f"bands need at least 2 rows, got {rows}")
+    edges = list(range(0, height, rows)) + [height]
+    if len(edges) > 2 and edges[-1] - edges[-2] < 2:
+        edges.pop(-2)
+    return list(itertools.pairwise(edges))
+
+
+def _image_on_host_memory(op: Malvar, array: np.ndarray) -> np.ndarray:
+    """A CPU device reads and writes host memory: buffers over the numpy arrays, no copies in or out
+    (3000x3000 on PoCL: 216 -> ~120 ms through the public call; the upload and download were ~45 % of it)."""
+    import pyopencl as cl
+
+    runtime, flags = op.runtime, cl.mem_flags
+    image = np.empty(op.image_shape, np.float32)
+    source = cl.Buffer(runtime.context, flags.READ_ONLY | flags.USE_HOST_PTR, hostbuf=array)
+    target = cl.Buffer(runtime.context, flags.WRITE_ONLY | flags.USE_HOST_PTR, hostbuf=image)
+    op.image_rows(runtime.queue, source, target, (0, op.height))
+    mapped, _ = cl.enqueue_map_buffer(runtime.queue, target, cl.map_flags.READ, 0, op.image_shape, np.float32)
+    mapped.base.release(runtime.queue)  # the map waits for the kernel and makes its writes visible in ``image``
+    return image
+
+
+def _image_streamed(op: Malvar, array: np.ndarray, rows: int = STREAM_ROWS) -> np.ndarray:
+    """A device with its own memory: bands of rows go up on one queue, through the filters on a second and
+    down on a third, so the transfers of one band overlap the others' (each band's filters wait for its own
+    and its neighbours' uploads: the 2-row halo)."""
+    import pyopencl as cl
+
+    runtime = op.runtime
+    upload, compute, download = runtime.side_queues(3)
+    image = np.empty(op.image_shape, np.float32)
+    source = cl.Buffer(runtime.context, cl.mem_flags.READ_ONLY, array.nbytes)
+    target = cl.Buffer(runtime.context, cl.mem_flags.WRITE_ONLY, image.nbytes)
+    bands = row_bands(op.height, rows)
+    row_bytes = array.strides[0]
+    sent = [cl.enqueue_copy(upload, source, array[r0:r1], dst_offset=r0 * row_bytes, is_blocking=False)
+            for r0, r1 in bands]
+    done = []
+    for k, band in enumerate(bands):
+        filtered = op.image_rows(compute, source, target, band,
+                                 wait_for=sent[max(k - 1, 0):k + 2])
+        r0, r1 = band
+        done.append(cl.enqueue_copy(download, image[r0:r1], target, src_offset=r0 * image.strides[0],
+                                    is_blocking=False, wait_for=[filtered]))
+    cl.wait_for_events(done)
+    return image
 
 
 def _validate_mosaic(mosaic) -> np.ndarray:
@@ -172,30 +241,15 @@ def malvar(mosaic, pattern: str, origin=(0, 0), device=None) -> np.ndarray:
     (0, 1), (1, 0), (1, 1)); ``origin`` is the sensor (row, col) of the first pixel.
     ``device`` selects the device as in :func:`lfcl.device.get_runtime`.
     """
+    import pyopencl as cl
+
     from ..device import get_runtime
 
     pattern = parse_pattern(pattern)
     array = _validate_mosaic(mosaic)
     runtime = get_runtime(device)
     op = Malvar(runtime, array.shape, pattern, origin)
-    import pyopencl as cl
-
-    if not runtime.device.type & cl.device_type.CPU:
-        planes = op.forward(runtime.to_device(array)).get()
-        return np.ascontiguousarray(planes.transpose(1, 2, 0))
-    # A CPU device reads and writes host memory: buffers over the numpy arrays, no copies in or out
-    # (3000x3000 on PoCL: 216 -> ~120 ms through this call, the upload and download were ~45% of it).
-    import pyopencl.array as cla
-
-    flags = cl.mem_flags
-    planes = np.empty(op.planes_shape, np.float32)
-    source = cla.Array(runtime.queue, array.shape, np.float32,
-                       data=cl.Buffer(runtime.context, flags.READ_ONLY | flags.USE_HOST_PTR, hostbuf=array))
-    target = cla.Array(runtime.queue, planes.shape, np.float32,
-                       data=cl.Buffer(runtime.context, flags.WRITE_ONLY | flags.USE_HOST_PTR, hostbuf=planes))
-    op.forward(source, out=target)
-    mapped, _ = cl.enqueue_map_buffer(runtime.queue, target.data, cl.map_flags.READ, 0, planes.shape, np.float32)
-    try:  # the map waits for the kernel and makes its writes visible on the host
-        return np.ascontiguousarray(mapped.transpose(1, 2, 0))
-    finally:
-        mapped.base.release(runtime.queue)
+    # The kernel writes the (H, W, 3) image itself: no transpose on the host.
+    if runtime.device.type & cl.device_type.CPU:
+        return _image_on_host_memory(op, array)
+    return _image_streamed(op, array)

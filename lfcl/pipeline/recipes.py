@@ -1,6 +1,7 @@
 """Stage recipes: TOML files of `lfcl process` settings (docs/stages.md).
 
-A recipe is a flat TOML table; every key is optional and has a default (:data:`DEFAULTS`)::
+A recipe is a flat TOML table; every key is optional and has a default (:data:`DEFAULTS`). The keys, their
+defaults and their checks are the stages' (lfcl/pipeline/parameters.py, the fields marked ``recipe``)::
 
     description = "..."           # free text
     method = "auto"               # any of lfcl.demosaic.names.METHODS
@@ -9,7 +10,7 @@ A recipe is a flat TOML table; every key is optional and has a default (:data:`D
     iterations = 20               # >= 1; absent: the method's early-stopping rule
     outputs = ["center", "mean", "lightfield"]   # or "center,mean,lightfield"
     refocus = "-1:1:0.25"         # slopes, used with the refocus output
-    format = "exr"                # exr or tiff
+    format = "exr"                # exr, tiff or dng
     previews = true               # 8-bit sRGB PNGs beside the images
 
 The packaged recipes (``default``, ``lowlight``, ``preview``) live in ``lfcl/pipeline/recipe_files/`` of the
@@ -23,19 +24,11 @@ import importlib.resources
 import tomllib
 from pathlib import Path
 
-from ..demosaic.names import DEFAULT_METHOD
+from .parameters import STAGES, ParameterError, entries, recipe_defaults, recipe_entries, recipe_values
 
-DEFAULTS = {
-    "description": "",
-    "method": DEFAULT_METHOD,
-    "strength": 1.0,
-    "lambda": None,
-    "iterations": None,
-    "outputs": ["center", "mean", "lightfield"],
-    "refocus": "-1:1:0.25",
-    "format": "exr",
-    "previews": True,
-}
+#: Every recipe key and its default: ``description`` (free text) and the stages' recipe keys
+#: (lfcl/pipeline/parameters.py: the fields with ``recipe``), in the order recipes record them.
+DEFAULTS = {"description": "", **recipe_defaults()}
 PACKAGED = ("default", "lowlight", "preview")
 
 
@@ -48,59 +41,17 @@ def recipe_dir():
 
 
 def _check(data: dict, where: str) -> dict:
-    from ..demosaic.methods import METHODS
-    from ..outputs.files import parse_format, parse_outputs
-    from ..outputs.refocus import parse_slopes
-
+    """``data`` (recipe key -> value) with the defaults filled in, checked by the stages' schemas and normalised."""
     unknown = sorted(set(data) - set(DEFAULTS))
     if unknown:
         raise ValueError(f"{where}: unknown key {', '.join(map(repr, unknown))}; known: {', '.join(DEFAULTS)}")
     out = {**DEFAULTS, **data}
-
-    def bad(key, why):
-        return ValueError(f"{where}: {key} = {data[key]!r}: {why}")
-
-    def number(x):
-        return isinstance(x, (int, float)) and not isinstance(x, bool)
-
     if not isinstance(out["description"], str):
-        raise bad("description", "must be a string")
-    if out["method"] not in METHODS:
-        raise bad("method", f"must be one of {', '.join(METHODS)}")
-    if not number(out["strength"]) or not out["strength"] > 0:
-        raise bad("strength", "must be a number > 0")
-    out["strength"] = float(out["strength"])
-    if out["lambda"] is not None:
-        if not number(out["lambda"]) or not out["lambda"] >= 0:
-            raise bad("lambda", "must be a number >= 0")
-        out["lambda"] = float(out["lambda"])
-    if out["iterations"] is not None and (not isinstance(out["iterations"], int) or isinstance(out["iterations"], bool)
-                                          or out["iterations"] < 1):
-        raise bad("iterations", "must be an integer >= 1")
-    outputs = out["outputs"]
-    if isinstance(outputs, list) and all(isinstance(o, str) for o in outputs):
-        outputs = ",".join(outputs)
-    if not isinstance(outputs, str):
-        raise bad("outputs", "must be a list of output names or a comma-separated string")
+        raise ValueError(f"{where}: description = {out['description']!r}: must be a string")
     try:
-        out["outputs"] = parse_outputs(outputs)
-    except ValueError as e:
-        raise bad("outputs", str(e)) from None
-    if not isinstance(out["refocus"], str):
-        raise bad("refocus", "must be a string like '-1:1:0.25' or '-0.5,0,0.5'")
-    try:
-        parse_slopes(out["refocus"])
-    except ValueError as e:
-        raise bad("refocus", str(e)) from None
-    try:
-        out["format"] = parse_format(out["format"]) if isinstance(out["format"], str) else None
-    except ValueError:
-        out["format"] = None
-    if out["format"] is None:
-        raise bad("format", "must be exr or tiff")
-    if not isinstance(out["previews"], bool):
-        raise bad("previews", "must be true or false")
-    return out
+        return {"description": out["description"], **recipe_values(out)}
+    except ParameterError as e:
+        raise ValueError(f"{where}: {e.key} = {out[e.key]!r}: {e.why}") from None
 
 
 def load_recipe(name_or_path) -> dict:
@@ -138,33 +89,36 @@ def load_recipe(name_or_path) -> dict:
 def pipeline_from_recipe(recipe, **overrides):
     """A :class:`lfcl.pipeline.stages.Pipeline` from a recipe (a dict from :func:`load_recipe`, a name or a path).
 
-    ``overrides``: recipe keys (``lam`` may stand for ``lambda``, ``fmt`` for ``format``) and
-    the stages' other options: ``pattern``, ``pitch``, ``calibration``, ``white``, ``device``.
-    Recipe keys are validated like the file's; ``None`` leaves the recipe's value.
+    ``overrides``: recipe keys (a field's name may stand for its key: ``lam`` for ``lambda``, ``fmt`` for
+    ``format``), any other option of the stages (lfcl/pipeline/parameters.py: ``pattern``, ``pitch``,
+    ``calibration``, ``white``, ``tolerance_db``, ``start``, ...) and ``device``. Recipe keys are
+    validated like the file's, the others by their stage; ``None`` leaves the recipe's value (or the default).
     """
     from ..demosaic.auto import view_for_outputs
     from .stages import Decode, Demosaic, Grid, Outputs, Pipeline
 
     if not isinstance(recipe, dict):
         recipe = load_recipe(recipe)
-    aliases = {"lam": "lambda", "fmt": "format"}
-    extra_keys = ("pattern", "pitch", "calibration", "white", "device")
-    given = {aliases.get(k, k): v for k, v in overrides.items() if v is not None}
-    unknown = sorted(k for k in given if k not in DEFAULTS and k not in extra_keys)
+    fields = {e.name: e for e in entries()}
+    recipe_key = {e.name: e.key for e in recipe_entries()}
+    given = {recipe_key.get(k, k): v for k, v in overrides.items() if v is not None}
+    unknown = sorted(k for k in given if k not in DEFAULTS and k not in fields and k != "device")
     if unknown:
         raise ValueError(f"pipeline_from_recipe: unknown option {', '.join(map(repr, unknown))}")
     where = f"recipe {recipe.get('name', '?')} with overrides"
     base = {k: recipe[k] for k in DEFAULTS if recipe.get(k) is not None}
     merged = _check({**base, **{k: v for k, v in given.items() if k in DEFAULTS}}, where)
     merged.update(name=recipe.get("name"), path=recipe.get("path"))
+    values = {**{k: v for k, v in given.items() if k in fields}, **{e.name: merged[e.key] for e in recipe_entries()}}
+    values.setdefault("auto_view", view_for_outputs(merged["outputs"]))  # as `lfcl process`: auto judged on the outputs
+
+    decode, grid, demosaic, outputs = (
+        {e.name: values[e.name] for e in entries(schema) if e.name in values} for schema in STAGES)
     pipeline = Pipeline([
-        Decode(given.get("pattern")),
-        Grid(pitch=given.get("pitch"), calibration=given.get("calibration"), white=given.get("white"),
-             pattern=given.get("pattern")),
-        Demosaic(merged["method"], lam=merged["lambda"], iterations=merged["iterations"],
-                 strength=merged["strength"], device=given.get("device"),
-                 auto_view=view_for_outputs(merged["outputs"])),  # as `lfcl process`: auto judged on the outputs
-        Outputs(merged["outputs"], refocus=merged["refocus"], fmt=merged["format"], previews=merged["previews"]),
+        Decode(**decode),
+        Grid(**grid, pattern=values.get("pattern")),
+        Demosaic(**demosaic, device=given.get("device")),
+        Outputs(**outputs),
     ], recipe=merged)
     # every output file records the recipe and the options used (as `lfcl process --recipe` does)
     pipeline.stages[-1].metadata["recipe"] = {"name": merged["name"], "path": merged["path"],

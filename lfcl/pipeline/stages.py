@@ -17,12 +17,12 @@ stage               takes                                 returns
 
 These objects are the one implementation: ``lfcl process`` and ``lfcl batch`` build a
 :class:`Pipeline` of them (lfcl/cli/commands/process.py) and run it, so a Pipeline and the
-commands with the same settings write the same files.
+commands with the same settings write the same files. Each stage's options are its schema in
+lfcl/pipeline/parameters.py (checked there; ``options()`` records them in ``summary.json``).
 """
 
 from __future__ import annotations
 
-import math
 import os
 import time
 from pathlib import Path
@@ -31,16 +31,16 @@ from typing import NamedTuple
 import numpy as np
 
 from ..demosaic.auto_report import skipped_by_auto
-from ..demosaic.names import DEFAULT_METHOD
 from ..io.raw import Mosaic
-
-DEFAULT_PITCH = 9
-DEFAULT_OUTPUTS = ("center", "mean", "lightfield")
-DEFAULT_REFOCUS = "-1:1:0.25"
-#: The grid kinds the Demosaic stage takes (``Gridded.metadata["geometry"]["grid"]``): an aligned
-#: square grid of integer pitch, sliced exactly (lfcl.demosaic.methods), and any other calibrated grid,
-#: demosaiced with the resampling inside the forward operator (lfcl.demosaic.resampled, docs/geometry.md).
-GRID_KINDS = ("aligned-square", "resampled")
+from .parameters import (
+    DEFAULT_OUTPUTS,  # noqa: F401 (part of this module's names)
+    DEFAULT_PITCH,
+    DEFAULT_REFOCUS,  # noqa: F401
+    DecodeParameters,
+    DemosaicParameters,
+    GridParameters,
+    OutputParameters,
+)
 
 
 class Gridded(NamedTuple):
@@ -56,17 +56,18 @@ class Gridded(NamedTuple):
       weights (lfcl/grid/vignetting.py), or None (always None for ``resampled``: its sampling model
       holds the per-pixel response).
     * ``metadata``: JSON-friendly, recorded in every output file (so nothing run-dependent
-      such as timings): ``geometry`` always, with ``grid`` (the grid kind, one of
-      :data:`GRID_KINDS`), ``pitch`` [U, V], ``lenses`` [S, T], ``from`` (where the grid came
-      from) and ``first_lens_pixel`` (aligned) or ``packing``, ``features``, ``lens_origin``
-      (resampled); ``calibration`` and ``flat_field`` when they apply.
+      such as timings): ``geometry`` always (the grid's ``geometry(how)`` record, lfcl/grid/model.py), with
+      ``grid`` (the grid kind, one of lfcl.grid.model.GRID_KINDS), ``pitch`` [U, V], ``lenses`` [S, T],
+      ``from`` (where the grid came from) and ``first_lens_pixel`` (aligned) or ``packing``, ``features``,
+      ``lens_origin`` (resampled); ``calibration`` and ``flat_field`` when they apply.
     * ``mosaic``: the decoded raw (pattern, noise profile, colour metadata).
     * ``lenses``: (S, T) of the light field.
     * ``seconds``: parts of this stage worth timing apart (``calibrate`` with a white image).
     * ``sampling``: for ``resampled``, the :class:`lfcl.grid.resampling.SamplingModel` (where every
       regular sample lies on the sensor); None for ``aligned-square``.
 
-    The Demosaic stage refuses a kind it does not know.
+    :attr:`grid` is the lens grid as a typed value (lfcl.grid.model.AlignedGrid or ResampledGrid), which the
+    Demosaic stage hands to lfcl.demosaic.driver.demosaic_grid; it refuses a kind it does not know.
     """
 
     data: np.ndarray
@@ -78,6 +79,15 @@ class Gridded(NamedTuple):
     lenses: tuple
     seconds: dict = {}  # noqa: RUF012 (a NamedTuple default; never mutated)
     sampling: object = None  # lfcl.grid.resampling.SamplingModel for the "resampled" kind
+
+    @property
+    def grid(self):
+        """The typed lens grid (lfcl.grid.model.lens_grid): its kind from ``metadata["geometry"]``, the rest from
+        these fields; a one-line ValueError for a kind it does not know."""
+        from ..grid.model import lens_grid
+
+        return lens_grid(self.metadata.get("geometry", {}), pitch=self.pitch, origin=self.origin,
+                         lenses=self.lenses, lens_response=self.lens_response, sampling=self.sampling)
 
 
 class Demosaiced(NamedTuple):
@@ -98,23 +108,19 @@ class Written(NamedTuple):
 
 
 def grid_words(geometry: dict) -> str:
-    """``hexagonal``, ``rotated, non-integer-pitch square`` or ``aligned square``: a grid kind in words."""
-    if geometry.get("grid") != "resampled":
-        return "aligned square"
-    if geometry.get("packing") == "hex":
-        return "hexagonal"
-    return f"{', '.join(geometry.get('features') or ['non-aligned'])} square"
+    """``hexagonal``, ``rotated, non-integer-pitch square`` or ``aligned square``: the grid of a ``geometry`` record
+    (a summary's, or ``grid``, ``packing``, ``features``) in words (lfcl.grid.model: the grid's ``words``)."""
+    from ..grid.model import lens_grid
+
+    return lens_grid(geometry).words
 
 
 def check_method_for_grid(method: str, kind: str, what: str = "") -> None:
     """A one-line ``ValueError`` when ``method`` does not run on a grid of ``kind`` (``what``: the grid, for the
-    message), naming the methods that do."""
-    if kind == "resampled":
-        from ..demosaic.resampled import GRID_METHOD_NAMES
+    message), naming the methods that do (lfcl.grid.model: the grid's ``check_method``)."""
+    from ..grid.model import lens_grid
 
-        if method not in GRID_METHOD_NAMES:
-            raise ValueError(f"method {method!r} does not run on {what or 'a resampled lens grid'}: the resampling "
-                             f"path (rotated, non-integer-pitch, hexagonal grids) takes {', '.join(GRID_METHOD_NAMES)}")
+    lens_grid({"grid": kind}).check_method(method, what or "a resampled lens grid")
 
 
 def _need(value, kind, stage: str, what: str):
@@ -122,18 +128,32 @@ def _need(value, kind, stage: str, what: str):
         raise ValueError(f"{stage} takes {what}, got {type(value).__name__}")
 
 
+def _parameters(stage: str, schema: type, **values):
+    """``schema(**values)`` (lfcl/pipeline/parameters.py: the stage's options, checked); its one-line
+    ``ValueError`` names the stage."""
+    try:
+        return schema(**values)
+    except ValueError as e:
+        raise ValueError(f"{stage}: {e}") from None
+
+
+def _take(stage, parameters) -> None:
+    """The stage keeps its checked options (``stage.parameters``) and each as an attribute (``stage.method``)."""
+    stage.parameters = parameters
+    for name in parameters.__dataclass_fields__:
+        setattr(stage, name, getattr(parameters, name))
+
+
 class Decode:
     """path -> :class:`lfcl.io.raw.Mosaic` (DNG, camera raw, or EXR/TIFF/PNG mosaic with ``pattern``)."""
 
     name = "decode"
 
-    def __init__(self, pattern: str | None = None):
-        if pattern is not None and not isinstance(pattern, str):
-            raise ValueError(f"Decode: pattern must be a string like 'GRBG', got {pattern!r}")
-        self.pattern = pattern
+    def __init__(self, pattern: str | None = DecodeParameters.pattern):
+        _take(self, _parameters("Decode", DecodeParameters, pattern=pattern))
 
     def options(self) -> dict:
-        return {"pattern": self.pattern}
+        return self.parameters.options()
 
     def __call__(self, path) -> Mosaic:
         if not isinstance(path, (str, os.PathLike)):
@@ -158,23 +178,17 @@ class Grid:
 
     name = "grid"
 
-    def __init__(self, pitch: int | None = None, calibration=None, white=None, pattern: str | None = None):
-        given = [n for n, v in (("pitch", pitch), ("calibration", calibration), ("white", white)) if v is not None]
-        if len(given) > 1:
-            raise ValueError(f"Grid: give the lens grid once, not {' and '.join(given)} together")
-        if pitch is not None and (isinstance(pitch, bool) or not isinstance(pitch, (int, np.integer)) or pitch < 2):
-            raise ValueError(f"Grid: pitch must be an integer >= 2, got {pitch!r}")
-        for name, value in (("calibration", calibration), ("white", white)):
-            if value is not None and not Path(value).is_file():
-                raise ValueError(f"Grid: {name} {str(value)!r} does not exist")
-        self.pitch, self.calibration, self.white, self.pattern = pitch, calibration, white, pattern
+    def __init__(self, pitch: int | None = GridParameters.pitch, calibration=GridParameters.calibration,
+                 white=GridParameters.white, pattern: str | None = DecodeParameters.pattern):
+        _take(self, _parameters("Grid", GridParameters, pitch=pitch, calibration=calibration, white=white))
+        self.pattern = _parameters("Grid", DecodeParameters, pattern=pattern).pattern  # the white image's
 
     def options(self) -> dict:
-        return {"pitch": self.pitch, "calibration": None if self.calibration is None else str(self.calibration),
-                "white": None if self.white is None else str(self.white)}
+        return self.parameters.options()
 
     def __call__(self, mosaic: Mosaic) -> Gridded:
         _need(mosaic, Mosaic, "Grid", "a Mosaic (from Decode)")
+        from ..grid.model import AlignedGrid
         from ..layout import LightFieldShape
 
         meta: dict = {}
@@ -211,21 +225,19 @@ class Grid:
             full = LightFieldShape.from_sensor(mosaic.shape, (P, P))
             S, T = full.S, full.T
         H, W = LightFieldShape(S, T, P, P).sensor_shape
-        meta["geometry"] = {"grid": "aligned-square", "pitch": [P, P], "lenses": [S, T],
-                            "first_lens_pixel": [r0, c0], "from": how}
+        meta["geometry"] = AlignedGrid(P, (r0, c0), (S, T)).geometry(how)
         return Gridded(mosaic.data[r0:r0 + H, c0:c0 + W], int(P), (r0, c0), lens_response, meta, mosaic, (S, T),
                        seconds)
 
 
 def _resampled(mosaic: Mosaic, cal, geo: dict, how: str, meta: dict, seconds: dict) -> Gridded:
     """The ``resampled`` kind of a calibrated grid: the whole sensor and its sampling model."""
+    from ..grid.model import ResampledGrid
     from ..grid.resampling import sampling_model
 
     sampling = sampling_model(cal, mosaic.pattern)
-    (U, V), (S, T) = sampling.views, sampling.lenses
-    meta["geometry"] = {"grid": "resampled", "pitch": [U, V], "lenses": [S, T], "from": how,
-                        "packing": cal.grid.packing, "features": list(geo["features"]),
-                        "lens_origin": list(sampling.lens_origin)}
+    U, (S, T) = sampling.views[0], sampling.lenses
+    meta["geometry"] = ResampledGrid(sampling, cal.grid.packing, geo["features"]).geometry(how)
     if cal.weight is not None:
         meta["flat_field"] = {"response": "the calibration's weight model, micro-image cores scaled to median 1",
                               "left_out_below": sampling.threshold,
@@ -234,8 +246,8 @@ def _resampled(mosaic: Mosaic, cal, geo: dict, how: str, meta: dict, seconds: di
 
 
 class Demosaic:
-    """Gridded -> :class:`Demosaiced` with ``lfcl.demosaic.methods.demosaic_lightfield`` (``aligned-square``) or
-    ``lfcl.demosaic.resampled.demosaic_resampled`` (``resampled``: auto, malvar, admm-uv, admm-st, admm-uvst).
+    """Gridded -> :class:`Demosaiced` with ``lfcl.demosaic.driver.demosaic_grid`` on ``Gridded.grid`` (the methods
+    of ``resampled``: auto, malvar, admm-uv, admm-st, admm-uvst).
 
     ``lam``/``iterations`` ``None``: follow the noise level (docs/admm.md); ``strength``
     multiplies the default lambda. ``tolerance_db``: stop the ADMM iterations once one can
@@ -256,102 +268,45 @@ class Demosaic:
 
     name = "demosaic"
 
-    def __init__(self, method: str = DEFAULT_METHOD, lam: float | None = None, iterations: int | None = None,
-                 strength: float = 1.0, device=None, callback=None, max_memory: int | None = None,
-                 tolerance_db: float | None = None, start: str | None = None,
-                 skip_flat: bool | float | None = None, auto_view: str = "both", safety_net: bool = True):
-        from ..demosaic.auto import check_view
-        from ..demosaic.methods import STARTS, flat_threshold_for, parse_method
-
-        try:
-            self.method = parse_method(method)
-        except ValueError as e:
-            raise ValueError(f"Demosaic: {e}") from None
-        if lam is not None and (isinstance(lam, bool) or not isinstance(lam, (int, float)) or not lam >= 0):
-            raise ValueError(f"Demosaic: lam must be a number >= 0 or None, got {lam!r}")
-        if iterations is not None and (isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer))
-                                       or iterations < 1):
-            raise ValueError(f"Demosaic: iterations must be an integer >= 1 or None, got {iterations!r}")
-        if isinstance(strength, bool) or not isinstance(strength, (int, float)) or not strength > 0:
-            raise ValueError(f"Demosaic: strength must be a number > 0, got {strength!r}")
-        if max_memory is not None and (isinstance(max_memory, bool) or not isinstance(max_memory, (int, np.integer))
-                                       or max_memory < 1):
-            raise ValueError(f"Demosaic: max_memory must be a number of bytes >= 1 or None, got {max_memory!r}")
-        if tolerance_db is not None and (isinstance(tolerance_db, bool) or not isinstance(tolerance_db, (int, float))
-                                         or not math.isfinite(tolerance_db) or not tolerance_db > 0):
-            raise ValueError(f"Demosaic: tolerance_db must be a number of dB > 0 or None, got {tolerance_db!r}")
-        self.tolerance_db = None if tolerance_db is None else float(tolerance_db)
-        if start is not None and start not in STARTS:
-            raise ValueError(f"Demosaic: start must be one of {', '.join(STARTS)} or None, got {start!r}")
-        self.start = start
-        try:  # auto passes it on to the method it picks, so check the value as for admm-uv
-            flat_threshold_for("admm-uv" if self.method == "auto" else self.method, skip_flat)
-        except ValueError as e:
-            raise ValueError(f"Demosaic: {e}") from None
-        self.skip_flat = skip_flat
-        if not isinstance(safety_net, bool):
-            raise ValueError(f"Demosaic: safety_net must be True or False, got {safety_net!r}")
-        self.safety_net = safety_net
-        try:
-            self.auto_view = check_view(auto_view)
-        except ValueError as e:
-            raise ValueError(f"Demosaic: {e}") from None
-        self.lam, self.iterations, self.strength = lam, iterations, float(strength)
-        self.max_memory = None if max_memory is None else int(max_memory)
-        self.device, self.callback = device, callback
+    def __init__(self, method: str = DemosaicParameters.method, lam: float | None = DemosaicParameters.lam,
+                 iterations: int | None = DemosaicParameters.iterations,
+                 strength: float = DemosaicParameters.strength, device=None, callback=None,
+                 max_memory: int | None = DemosaicParameters.max_memory,
+                 tolerance_db: float | None = DemosaicParameters.tolerance_db,
+                 start: str | None = DemosaicParameters.start,
+                 skip_flat: bool | float | None = DemosaicParameters.skip_flat,
+                 auto_view: str = DemosaicParameters.auto_view, safety_net: bool = DemosaicParameters.safety_net):
+        _take(self, _parameters("Demosaic", DemosaicParameters, method=method, lam=lam, iterations=iterations,
+                                strength=strength, max_memory=max_memory, tolerance_db=tolerance_db, start=start,
+                                skip_flat=skip_flat, auto_view=auto_view, safety_net=safety_net))
+        self.device, self.callback = device, callback  # where it runs and who watches: not parameters
 
     def options(self) -> dict:
-        return {"method": self.method, "lambda": self.lam, "iterations": self.iterations, "strength": self.strength,
-                "tolerance_db": self.tolerance_db, "max_memory": self.max_memory, "start": self.start,
-                "skip_flat": self.skip_flat, "safety_net": self.safety_net, **({"auto_view": self.auto_view} if self.method == "auto" else {})}
+        return self.parameters.options()
 
     def __call__(self, gridded: Gridded) -> Demosaiced:
         _need(gridded, Gridded, "Demosaic", "a Gridded (from Grid)")
-        kind = gridded.metadata.get("geometry", {}).get("grid")
-        if kind not in GRID_KINDS:
-            raise ValueError(f"Demosaic: lens grid {kind!r} is not one it takes ({', '.join(GRID_KINDS)})")
-        if kind == "resampled" and gridded.sampling is None:
-            raise ValueError("Demosaic: a resampled lens grid needs its sampling model (Gridded.sampling)")
         try:
-            check_method_for_grid(self.method, kind, f"the {grid_words(gridded.metadata['geometry'])} lens grid")
+            grid = gridded.grid
+            grid.check_complete()
+            grid.check_method(self.method)
+            grid.check_options(self.start, self.skip_flat)
         except ValueError as e:
             raise ValueError(f"Demosaic: {e}") from None
         from .. import __version__
+        from ..demosaic.driver import demosaic_grid
         from ..noise.model import from_noise_profile
 
-        mosaic, P = gridded.mosaic, gridded.pitch
+        mosaic = gridded.mosaic
         noise = None
         if mosaic.noise_profile is not None and self.method != "malvar":
             noise = from_noise_profile(mosaic.noise_profile, gridded.data)
-        extra: dict = {}
-        if kind == "resampled":
-            from ..demosaic.resampled import demosaic_resampled
-
-            if self.start not in (None, "malvar"):
-                raise ValueError(f"Demosaic: start {self.start} needs an aligned square lens grid; this one is "
-                                 f"{grid_words(gridded.metadata['geometry'])} (use the default start)")
-            if self.skip_flat not in (None, False):
-                raise ValueError("Demosaic: skipping flat lenses needs an aligned square lens grid; this one is "
-                                 f"{grid_words(gridded.metadata['geometry'])} (leave skip_flat out)")
-            result = demosaic_resampled(gridded.data, mosaic.pattern, gridded.sampling, self.method, lam=self.lam,
-                                        iterations=self.iterations, strength=self.strength, noise=noise,
-                                        device=self.device, callback=self.callback, max_memory=self.max_memory,
-                                        tolerance_db=self.tolerance_db, auto_view=self.auto_view)
-            lightfield = result.lightfield
-            extra["sampling"] = result.sampling.as_meta()
-        else:
-            from ..demosaic.methods import demosaic_lightfield
-            from ..layout import LightFieldShape, planes_to_exchange
-
-            result = demosaic_lightfield(gridded.data, mosaic.pattern, (P, P), self.method, origin=gridded.origin,
-                                         lam=self.lam, iterations=self.iterations, strength=self.strength,
-                                         noise=noise, device=self.device, callback=self.callback,
-                                         lens_response=gridded.lens_response, max_memory=self.max_memory,
-                                         tolerance_db=self.tolerance_db, start=self.start,
-                                         skip_flat=self.skip_flat, auto_view=self.auto_view,
-                                         safety_net=self.safety_net)
-            S, T = gridded.lenses
-            lightfield = planes_to_exchange(result.planes, LightFieldShape(S, T, P, P))
+        result = demosaic_grid(gridded.data, mosaic.pattern, grid, self.method, lam=self.lam,
+                               iterations=self.iterations, strength=self.strength, noise=noise, device=self.device,
+                               callback=self.callback, max_memory=self.max_memory, tolerance_db=self.tolerance_db,
+                               start=self.start, skip_flat=self.skip_flat, auto_view=self.auto_view,
+                               safety_net=self.safety_net)
+        extra = {"sampling": result.sampling.as_meta()} if result.sampling is not None else {}
         meta = {
             "method": self.method, "parameters": result.parameters, "source": mosaic.source,
             "pattern": mosaic.pattern, "geometry": gridded.metadata["geometry"],
@@ -360,7 +315,7 @@ class Demosaic:
             "input": mosaic.metadata(), "generator": f"lfcl {__version__} stages",
             **{k: v for k, v in gridded.metadata.items() if k != "geometry"}, **extra,
         }
-        return Demosaiced(result, lightfield, meta, mosaic)
+        return Demosaiced(result, result.lightfield, meta, mosaic)
 
 
 class Outputs:
@@ -370,23 +325,19 @@ class Outputs:
 
     name = "outputs"
 
-    def __init__(self, outputs=DEFAULT_OUTPUTS, refocus: str = DEFAULT_REFOCUS, fmt: str = "exr",
-                 previews: bool = True, metadata: dict | None = None):
-        from ..outputs.files import parse_format, parse_outputs
+    def __init__(self, outputs=OutputParameters.outputs, refocus: str = OutputParameters.refocus,
+                 fmt: str = OutputParameters.fmt, previews: bool = OutputParameters.previews,
+                 metadata: dict | None = None):
         from ..outputs.refocus import parse_slopes
 
-        try:
-            self.outputs = parse_outputs(outputs if isinstance(outputs, str) else ",".join(outputs))
-            self.fmt = parse_format(fmt)
-            self.slopes = parse_slopes(refocus) if "refocus" in self.outputs else []
-        except (ValueError, TypeError) as e:
-            raise ValueError(f"Outputs: {e}") from None
-        if not isinstance(previews, bool):
-            raise ValueError(f"Outputs: previews must be true or false, got {previews!r}")
-        self.refocus, self.previews, self.metadata = refocus, previews, dict(metadata or {})
+        _take(self, _parameters("Outputs", OutputParameters, outputs=outputs, refocus=refocus, fmt=fmt,
+                                previews=previews))
+        self.outputs = list(self.outputs)
+        self.slopes = parse_slopes(self.refocus) if "refocus" in self.outputs else []
+        self.metadata = dict(metadata or {})
 
     def options(self) -> dict:
-        return {"outputs": list(self.outputs), "refocus": self.refocus, "format": self.fmt, "previews": self.previews}
+        return self.parameters.options()
 
     def file_metadata(self, demosaiced: Demosaiced) -> dict:
         """What every output file records: the Demosaic stage's metadata and this stage's ``metadata``."""

@@ -16,9 +16,9 @@ Scaled-form ADMM with z = K x, K = D or [D; D C]:
     u <- u + K x - z                                           scaled dual update
 
 With lens weights that leave dark pixels out of the data term, the prior leaves
-them out too (params.prior_mask): K = M [D; D C], M dropping every difference
-that touches such a pixel; they keep their start value during the iterations and
-get the harmonic extension of their lens's lit pixels at the end (lfcl/ops/lensfill.py).
+them out too: K = M [D; D C], M dropping every difference that touches such a
+pixel; they keep their start value during the iterations and get the harmonic
+extension of their lens's lit pixels at the end (lfcl/ops/lensfill.py).
 
 The start x0 is normally the Malvar demosaic, z0 = D x0 and u0 = 0. It stops
 on the primal/dual residuals (Boyd et al.), on the rms change of x, or after
@@ -76,21 +76,17 @@ def _lens_laplacian(pitch, active: tuple | None = None) -> np.ndarray:
                     axis=1)
 
 
-def lens_components_measure_every_colour(pattern: str, origin, pitch, lens_weights, prior_mask: bool) -> bool:
+def lens_components_measure_every_colour(pattern: str, origin, pitch, lens_weights) -> bool:
     """Whether the lens x-update is regular: every part of a lens that the prior connects
     has a weighted sample of each colour, whatever the lens's Bayer parity.
 
-    Without the mask the (u, v) prior connects the whole lens; with it, only the pixels of
-    weight > 0 that touch (4-neighbours), and pixels of weight 0 are out of the solve.
-    If some part lacks a colour, that colour's constant on it is free: the exact solve
-    would zero it, while CG keeps the warm start's, so CG is used then.
+    The (u, v) prior connects the pixels of weight > 0 that touch (4-neighbours); pixels of
+    weight 0 are out of the solve. If some part lacks a colour, that colour's constant on it
+    is free: the exact solve would zero it, while CG keeps the warm start's, so CG is used then.
     """
     U, V = pitch
     active = np.asarray(lens_weights, dtype=np.float64).reshape(U, V) > 0
-    if prior_mask:
-        labels, parts = scipy.ndimage.label(active)
-    else:
-        labels, parts = np.ones((U, V), int), 1
+    labels, parts = scipy.ndimage.label(active)
     for ps in range(2):
         for pt in range(2):
             colours = channel_map((U, V), pattern, (origin[0] + ps, origin[1] + pt))
@@ -116,7 +112,7 @@ def _inverse_on(normal: np.ndarray, rows: np.ndarray, regular: bool) -> np.ndarr
 
 @functools.lru_cache(maxsize=16)
 def lens_block_inverses(pattern: str, origin, pitch, rho: float, lens_weights: tuple | None = None,
-                        cross_channel: bool = False, prior_mask: bool = False) -> np.ndarray:
+                        cross_channel: bool = False) -> np.ndarray:
     """(A^T W A + rho K_uv^T K_uv)^-1 restricted to one lens, rows per output colour.
 
     K = D_uv: [4 parities, 3 colours, UV, UV], one independent block per colour.
@@ -125,11 +121,9 @@ def lens_block_inverses(pattern: str, origin, pitch, rho: float, lens_weights: t
     colour: [4, 3, UV, 3UV], columns ordered (colour, u, v).
 
     ``lens_weights``: the data-term weight of each of the lens's UV pixels (row-major
-    tuple, hashable for the cache); None for all ones.
-
-    ``prior_mask``: the prior keeps only differences between pixels of weight > 0
-    (K = M D_uv); pixels of weight 0 then have zero rows, are left out of the inverse
-    (their rows and columns are 0) and the kernel leaves them unchanged.
+    tuple, hashable for the cache); None for all ones. The prior keeps only differences
+    between pixels of weight > 0 (K = M D_uv); pixels of weight 0 then have zero rows, are
+    left out of the inverse (their rows and columns are 0) and the kernel leaves them unchanged.
 
     Parity 2*ps + pt: the Bayer parity (row, col) of the lens's first sensor pixel. A
     block is symmetric positive definite when the lens has a pixel of each colour it
@@ -139,8 +133,8 @@ def lens_block_inverses(pattern: str, origin, pitch, rho: float, lens_weights: t
     U, V = pitch
     UV = U * V
     weights = np.ones(UV) if lens_weights is None else np.asarray(lens_weights, dtype=np.float64)
-    active = weights > 0 if prior_mask else np.ones(UV, bool)
-    laplacian = _lens_laplacian((U, V), tuple(active) if prior_mask else None)
+    active = weights > 0
+    laplacian = _lens_laplacian((U, V), None if active.all() else tuple(active))
     blocks = np.empty((4, 3, UV, 3 * UV if cross_channel else UV), np.float32)
     coupling = np.eye(3) + COLOUR_GRAM
     for ps in range(2):
@@ -217,7 +211,7 @@ class AdmmSolver:
         self._normal_args = (np.int32(self.height), np.int32(self.width), packed_pattern(pattern, origin))
         self._grid_defines = grid_defines(pitch, dims_mask(self.dims))
         self._cross_channel = False  # K = [D; D C]: set per solve from params.lam_xc
-        self._prior_mask = False  # K = M [D; D C]: set per solve (params.prior_mask and dark pixels)
+        self._prior_mask = False  # K = M [D; D C]: some lens weight is 0 (set_lens_weights)
         self._exact = False  # the x-update: exact per lens, or CG (set by prepare())
         self._row_runs = ((self.width + 15) // 16, self.height, 3)  # stencils: 16 columns a work-item
         self._rhs, self._tmp = (runtime.empty(self.planes_shape) for _ in range(2))
@@ -238,16 +232,6 @@ class AdmmSolver:
         """Build-time constants of the admm program: pitch, dims and the prior's blocks."""
         return (*self._grid_defines, ("CROSS_CHANNEL", int(self._cross_channel)),
                 ("PRIOR_MASK", int(self._prior_mask)))
-
-    def set_prior_mask(self, enabled: bool):
-        """Leave differences that touch a pixel of lens weight 0 out of the prior (issue #6).
-
-        Only takes effect while some lens weight is 0; solve() sets it from params.prior_mask.
-        """
-        self._prior_mask = bool(enabled) and min(self._weights_key) <= 0
-        mask = np.asarray(self._weights_key).reshape(self.U, self.V) if self._prior_mask else None
-        self.D.set_lens_weights(mask)
-        self.DC.set_lens_weights(mask)
 
     @property
     def _links(self):
@@ -330,9 +314,8 @@ class AdmmSolver:
         return sums
 
     def _every_lens_sees_every_colour(self) -> bool:
-        """lens_components_measure_every_colour for this solver's weights and mask."""
-        return lens_components_measure_every_colour(self.pattern, self.origin, (self.U, self.V),
-                                                    self._weights_key, self._prior_mask)
+        """lens_components_measure_every_colour for this solver's weights."""
+        return lens_components_measure_every_colour(self.pattern, self.origin, (self.U, self.V), self._weights_key)
 
     def _uses_lens_solve(self, params: AdmmParams) -> bool:
         if params.x_update == "lens":
@@ -347,11 +330,11 @@ class AdmmSolver:
 
     def lens_solve(self, rhs, x, rho, accumulate: bool = False):
         """x = (A^T W A + rho K_uv^T K_uv)^-1 rhs, exactly, lens by lens (x += ... with ``accumulate``)."""
-        key = (rho, self._weights_key, self._cross_channel, self._prior_mask)
+        key = (rho, self._weights_key, self._cross_channel)
         if self._inverse is None or self._inverse[0] != key:
             weights = None if self._weights_key == self._unit_weights else self._weights_key
             blocks = lens_block_inverses(self.pattern, tuple(o % 2 for o in self.origin), (self.U, self.V),
-                                         float(rho), weights, self._cross_channel, self._prior_mask)
+                                         float(rho), weights, self._cross_channel)
             # the kernel reads block columns as float16 runs: transpose, pad i to 16
             UV = self.U * self.V
             padded = np.zeros((4, 3, blocks.shape[-1], -(-UV // 16) * 16), np.float32)
@@ -376,7 +359,8 @@ class AdmmSolver:
         """Data-term weights of the U x V pixels of every lens (None: all ones).
 
         For an aligned grid the white image's response repeats from lens to lens;
-        a weight of 0 leaves that pixel out of the data term (a dark, vignetted corner).
+        a weight of 0 leaves that pixel out of the data term and out of the prior
+        (a dark, vignetted corner; issue #6, docs/admm.md).
         """
         weights = lens_weights_or_ones(lens_weights, (self.U, self.V))
         key = tuple(float(w) for w in weights.ravel())
@@ -384,13 +368,16 @@ class AdmmSolver:
             self._weights_key = key
             self._weights.set(weights.ravel())
             self._weight_runs.set(weight_runs_np(weights))
+            self._prior_mask = min(key) <= 0  # the mask only matters with dark pixels
+            mask = np.asarray(key).reshape(self.U, self.V) if self._prior_mask else None
+            self.D.set_lens_weights(mask)
+            self.DC.set_lens_weights(mask)
 
     def prepare(self, params: AdmmParams, lens_weights=None) -> bool:
-        """Set the lens weights, the prior's blocks and mask for ``params`` (before :meth:`start`
-        or :meth:`iterate`); returns whether the x-update is the exact lens solve."""
+        """Set the lens weights (and with them the prior's mask) and the prior's blocks for ``params``
+        (before :meth:`start` or :meth:`iterate`); returns whether the x-update is the exact lens solve."""
         self.set_lens_weights(lens_weights)
         self.set_cross_channel(params.cross_channel)
-        self.set_prior_mask(params.prior_mask)
         self._exact = self._uses_lens_solve(params)
         return self._exact
 

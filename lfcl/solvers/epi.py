@@ -30,6 +30,7 @@ generic ADMM core (:func:`lfcl.solvers.reference.admm_operators`).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 
 import numpy as np
@@ -43,7 +44,7 @@ from ..ops.epi import EpiGradient, check_maps, epi_matrix_np
 from ..ops.linalg import VectorOps, elementwise_size
 from ..ops.reduce import Reductions
 from .cg import preconditioned_cg
-from .params import AdmmParams, AdmmResult, IterationRecord, stop_reason
+from .params import AdmmParams, AdmmResult, BandedResult, IterationRecord, stop_reason
 from .reference import admm_operators
 
 
@@ -81,7 +82,7 @@ class EpiSetting:
     fb_per_lam: float  # lam_fb = fb_per_lam * lam
     change_per_sigma: float  # stop once rms(x_k - x_{k-1}) <= change_per_sigma * sigma (0: never)
     iterations: int  # at most
-    start: str  # the first estimate (lfcl.demosaic.methods.demosaic_lightfield's ``start``)
+    start: str  # the first estimate (lfcl.demosaic.methods.solve_aligned's ``start``)
 
 
 #: admm-epi's defaults by noise level, fitted by research/fit_epi.py on training seeds (docs/admm.md,
@@ -360,11 +361,15 @@ def admm_epi_reference(b, pattern, pitch, params: AdmmParams, x0, prior: EpiPrio
 def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: AdmmParams, lam_fb: float, noise,
                  device=None, lens_weights=None, callback=None, max_memory: int | None = None,
                  depth_options: dict | None = None) -> tuple[np.ndarray, dict, AdmmResult]:
-    """``admm-epi`` of lfcl.demosaic.methods.demosaic_lightfield: estimate the disparity from the raw
+    """``admm-epi`` of lfcl.demosaic.methods.solve_aligned: estimate the disparity from the raw
     (lfcl.depth.estimate_disparity), then solve from the start ``x0`` (device arrays ``b``, ``x0``).
 
+    A sensor whose solver does not fit ``max_memory`` (default 80 % of the device's) is solved in bands of
+    lens rows, each with the halo of lens rows its prior reaches (:func:`epi_halo`), each stopped by its own
+    rule; only the band's own rows are kept (docs/admm.md, "admm-epi in bands").
+
     Returns the planes [3, H, W] on the host, the parameters to record (the disparity's
-    statistics, lam_fb) and the solver's result (its x is dropped).
+    statistics, lam_fb, the bands) and the solver's runs (:class:`BandedResult`, their x dropped).
     """
     import time
 
@@ -376,22 +381,26 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
                                **(EPI_DEPTH_OPTIONS if depth_options is None else depth_options))
     depth_seconds = time.perf_counter() - began
     prior = EpiPrior(depth.disparity, depth.confidence, lam_fb=float(lam_fb))
-    lenses = (H // int(pitch[0]), W // int(pitch[1]))
+    U = int(pitch[0])
+    S = H // U
     budget = int(max_memory) if max_memory is not None else int(0.8 * runtime.device.global_mem_size)
-    needed = epi_solver_bytes((H, W), prior.has_fallback(lenses))
-    if needed > budget or runtime.device.max_mem_alloc_size < 4 * 6 * H * W:
-        raise ValueError(f"admm-epi on a {H}x{W} sensor needs about {needed / 2**30:.1f} GiB of device memory but "
-                         f"{runtime.name} allows {budget / 2**30:.1f} GiB; its prior couples neighbouring lenses, "
-                         "so it does not run in bands: use admm-uv, a crop, or a larger device")
-    solver = EpiAdmmSolver(runtime, (H, W), pattern, pitch, origin)
-    result = solver.solve(b, x0, params, prior, callback=callback, lens_weights=lens_weights)
-    planes = result.x.get()
+    fallback = prior.has_fallback((S, W // int(pitch[1])))
+    halo = epi_halo(depth.disparity, pitch)
+    bands = epi_bands(S, halo, epi_lens_rows_that_fit((U, W), fallback, budget, runtime.device.max_mem_alloc_size))
+    if len(bands) == 1:
+        solver = EpiAdmmSolver(runtime, (H, W), pattern, pitch, origin)
+        run = solver.solve(b, x0, params, prior, callback=callback, lens_weights=lens_weights)
+        planes = run.x.get()
+        result = BandedResult([dataclasses.replace(run, x=None)], [S])
+    else:
+        planes, result = _solve_bands(runtime, b.get(), x0.get(), pattern, pitch, origin, params, prior, bands,
+                                      callback, lens_weights)
     if not np.all(np.isfinite(planes)):
         raise FloatingPointError("admm-epi produced NaN/Inf values; try a smaller lambda or rho")
     d, w = depth.disparity, depth.confidence
     parameters = {
         "lam_fb": float(lam_fb),
-        "fallback_block": prior.has_fallback(lenses),
+        "fallback_block": fallback,
         "disparity": {
             "units": "lenses per view step", "min": float(d.min()), "max": float(d.max()),
             "mean": float(d.mean()), "median": float(np.median(d)), "std": float(d.std()),
@@ -401,4 +410,57 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
             "lookup": "d and confidence read at the lens the ray sees in the centre view",
         },
     }
-    return planes, parameters, dataclasses.replace(result, x=None)
+    if len(bands) > 1:
+        parameters["bands"] = {"lens_rows": [s1 - s0 for s0, s1, _, _ in bands], "halo_lens_rows": halo}
+    return planes, parameters, result
+
+
+def epi_halo(disparity, pitch) -> int:
+    """Lens rows of halo a band needs so that its own rows see what the whole sensor's would: a ray's
+    disparity is read up to ``|d| (U - 1) / 2`` lenses away (the lens it sees in the centre view), its
+    difference reaches ``|d|`` lenses on, and the cubic interpolation 2 more."""
+    dmax = float(np.max(np.abs(disparity))) if np.size(disparity) else 0.0
+    return math.ceil(dmax * (int(pitch[0]) - 1) / 2) + math.ceil(dmax) + 2
+
+
+def epi_lens_rows_that_fit(lens_row_shape, fallback: bool, budget: int, largest_buffer: int) -> int:
+    """The most lens rows whose EpiAdmmSolver fits ``budget`` bytes, with every buffer under ``largest_buffer``."""
+    U, W = lens_row_shape
+    per_row = epi_solver_bytes((U, W), fallback)
+    return max(0, min(budget // per_row, largest_buffer // (4 * 6 * U * W)))
+
+
+def epi_bands(lens_rows: int, halo: int, rows_that_fit: int) -> list[tuple[int, int, int, int]]:
+    """Bands ``(s0, s1, h0, h1)`` of lens rows: band ``[s0, s1)`` is solved over ``[h0, h1)``, its halo on both
+    sides (clipped at the frame), each band solve at most ``rows_that_fit`` lens rows. One band when all fit."""
+    if rows_that_fit >= lens_rows:
+        return [(0, lens_rows, 0, lens_rows)]
+    inner = rows_that_fit - 2 * halo
+    if inner < 1:
+        raise ValueError(f"admm-epi solves bands of lens rows with {halo} lens rows of halo on each side (its prior "
+                         f"couples lenses that far apart at this disparity), but the device memory holds "
+                         f"{rows_that_fit} lens rows: give it more (--max-memory) or use admm-uv")
+    count = -(-lens_rows // inner)
+    edges = [round(i * lens_rows / count) for i in range(count + 1)]
+    return [(s0, s1, max(0, s0 - halo), min(lens_rows, s1 + halo)) for s0, s1 in itertools.pairwise(edges)]
+
+
+def _solve_bands(runtime, b_host, x0_host, pattern, pitch, origin, params, prior: EpiPrior, bands, callback,
+                 lens_weights) -> tuple[np.ndarray, BandedResult]:
+    """Solve each band with its halo on its own (its own stop), keep its rows: planes [3, H, W] on the host."""
+    U = int(pitch[0])
+    planes = np.empty_like(x0_host)
+    runs, solver = [], None
+    for s0, s1, h0, h1 in bands:
+        rows = slice(h0 * U, h1 * U)
+        if solver is None or solver.height != (h1 - h0) * U:
+            solver = None  # the previous band's buffers go before the next band's come
+            solver = EpiAdmmSolver(runtime, ((h1 - h0) * U, b_host.shape[1]), pattern, pitch,
+                                   (origin[0] + h0 * U, origin[1]))
+        band_prior = dataclasses.replace(prior, disparity=prior.disparity[h0:h1],
+                                         confidence=None if prior.confidence is None else prior.confidence[h0:h1])
+        run = solver.solve(runtime.to_device(b_host[rows]), runtime.to_device(x0_host[:, rows]), params, band_prior,
+                           callback=callback, lens_weights=lens_weights)
+        planes[:, s0 * U:s1 * U] = run.x.get()[:, (s0 - h0) * U:(s1 - h0) * U]
+        runs.append(dataclasses.replace(run, x=None))
+    return planes, BandedResult(runs, [s1 - s0 for s0, s1, _, _ in bands])

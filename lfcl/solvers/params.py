@@ -23,9 +23,6 @@ class AdmmParams:
                 (0 disables it).
     change_tol: stop when rms(x_k - x_{k-1}) <= change_tol (0 disables it); the early
                 stop that the noise-matched defaults use (docs/admm.md).
-    prior_mask: leave the differences that touch a pixel of lens weight 0 (a dark, vignetted
-                corner) out of the prior too, not only out of the data term: those pixels
-                then keep their start value (docs/admm.md). No effect without zero weights.
     x_update:   "auto" (exact per-lens solve when the prior is over (u, v) only, else CG),
                 "cg" (always conjugate gradients) or "lens" (exact; (u, v) only). The
                 numpy reference always uses CG.
@@ -40,7 +37,6 @@ class AdmmParams:
     abs_tol: float = 0.0
     rel_tol: float = 0.0
     change_tol: float = 0.0
-    prior_mask: bool = True
     x_update: str = "auto"
 
     def __post_init__(self):
@@ -50,9 +46,6 @@ class AdmmParams:
                 raise ValueError(f"ADMM parameter {name} must be a finite number >= 0, got {value!r}")
         if self.rho <= 0:
             raise ValueError(f"ADMM parameter rho must be > 0, got {self.rho!r}")
-        if not isinstance(self.prior_mask, (bool, np.bool_)):
-            raise ValueError(
-                f"ADMM parameter prior_mask must be True or False, got {self.prior_mask!r}")
         if self.x_update not in ("auto", "cg", "lens"):
             raise ValueError(f"ADMM parameter x_update must be 'auto', 'cg' or 'lens', got {self.x_update!r}")
         for name in ("max_iter", "cg_steps"):
@@ -96,6 +89,35 @@ class AdmmResult:
     @property
     def iterations(self) -> int:
         return len(self.history)
+
+
+@dataclasses.dataclass
+class BandedResult:
+    """The runs of one solver over bands of lens rows (each stopped by its own rule), as one result."""
+
+    runs: list  # AdmmResult per band (x dropped), top to bottom
+    band_rows: list  # the lens rows each band wrote
+
+    @property
+    def iterations(self) -> int:
+        return max((run.iterations for run in self.runs), default=0)
+
+    @property
+    def history(self) -> list[IterationRecord]:
+        return [record for run in self.runs for record in run.history]
+
+    def history_rows(self) -> list[dict]:
+        """Every band's records as dicts with their ``band``."""
+        return [dict(dataclasses.asdict(r), band=i) for i, run in enumerate(self.runs) for r in run.history]
+
+    @property
+    def stop_reason(self) -> str:
+        if len(self.runs) == 1:
+            return self.runs[0].stop_reason
+        counts = [run.iterations for run in self.runs]
+        return (f"{len(self.runs)} bands of lens rows, {min(counts)}-{max(counts)} iterations (mean over lens rows "
+                f"{np.average(counts, weights=self.band_rows):.1f}), each stopped by its own rule "
+                f"(last band: {self.runs[-1].stop_reason})")
 
 
 def stop_reason(params: AdmmParams, record: IterationRecord, primal_scale: float, dual_scale: float,

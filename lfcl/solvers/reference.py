@@ -74,16 +74,16 @@ def admm_reference(b, pattern, pitch, dims, params: AdmmParams, x0, origin=(0, 0
     ``lens_weights`` [U, V] weight the data term, 1/2 ||W^(1/2) (A x - b)||^2, with the
     same weights under every lens (None: the paper's unweighted term).
     ``params.lam_xc > 0`` adds the cross-channel prior lam_xc ||D C x||_1: K = [D; D C].
-    ``params.prior_mask`` with zero weights: K = M D (M D C), the differences that touch a
-    pixel of weight 0 left out (docs/admm.md); such a pixel's CG row is 0, so it keeps x0
-    until the end, and then gets the harmonic extension of its lens (lfcl/ops/lensfill.py).
+    A pixel of weight 0 is left out of the prior too: K = M D (M D C), M dropping the
+    differences that touch it (docs/admm.md); its CG row is 0, so it keeps x0 until the
+    end, and then gets the harmonic extension of its lens (lfcl/ops/lensfill.py).
     """
     b = np.asarray(b, dtype=np.float64)
     U, V = pitch
     lens_w = np.ones((U, V)) if lens_weights is None else np.asarray(lens_weights, dtype=np.float64)
     w = np.tile(lens_w, (b.shape[0] // U, b.shape[1] // V))  # per sensor pixel
     x0 = np.asarray(x0, dtype=np.float64)
-    mask = lens_w if params.prior_mask and (lens_w <= 0).any() else None
+    mask = lens_w if (lens_w <= 0).any() else None
     prior, prior_adjoint, prior_weights = (lambda v: gradient_np(v, pitch, dims, mask),
                                            lambda z: gradient_adjoint_np(z, pitch, dims, mask), 1.0)
     links = linked_count_np(x0.shape, pitch, dims, mask)  # diag(K^T K)

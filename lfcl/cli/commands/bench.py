@@ -221,7 +221,8 @@ def matrix_command(scenes, shared, lux_text, methods, lenses, seed, as_json, dev
 @device_option
 @user_errors
 def api_command(size, repeats, as_json, device):
-    """The public lfcl.malvar call (copies and transfers included) against colour-demosaicing's Malvar2004."""
+    """The public lfcl.malvar and lfcl.lightfield calls (copies and transfers included) against
+    colour-demosaicing's Malvar2004 (cut into the light-field layout for the second)."""
     from ...bench import api
     from ...bench.timing import parse_size
 

@@ -1,6 +1,7 @@
 """`lfcl process`: a lenslet raw in, a demosaiced 4D light field and images out (docs/outputs.md).
 
-The options (:func:`process_options`, shared with `lfcl batch`) become a
+The options (:func:`process_options`, shared with `lfcl batch`; derived from the stages' parameter schemas in
+lfcl/pipeline/parameters.py, all but ``--recipe`` and ``--device``) become a
 :class:`ProcessSettings` (:func:`settings_from_options`: the ``--recipe``
 fills the options not given, and every option a user can get wrong is checked
 before any work), which builds a :class:`lfcl.pipeline.stages.Pipeline` (Decode, Grid,
@@ -18,81 +19,73 @@ from pathlib import Path
 
 import click
 
-from ...demosaic.names import DEFAULT_METHOD, FLAT_P, METHODS, STARTS
+from ...pipeline.parameters import (
+    DEFAULT_PITCH,  # noqa: F401 (lfcl batch's)
+    DEFAULT_REFOCUS,
+    OUTPUTS,  # noqa: F401 (the output kinds, without numpy)
+    DemosaicParameters,
+    OutputParameters,
+    Param,
+    defaults,
+    entries,
+    recipe_entries,
+)
+from ...pipeline.recipes import PACKAGED
 from . import PROCESS_SECTIONS, SectionedCommand, device_option, user_errors
 
-DEFAULT_OUTPUTS = "center,mean,lightfield"
-DEFAULT_REFOCUS = "-1:1:0.25"
-DEFAULT_PITCH = 9
+#: Options a ``--recipe`` supplies when not given (click parameter name -> recipe key; the schema's recipe keys).
+RECIPE_KEYS = {e.cli_name: e.key for e in recipe_entries()}
 
-#: The output kinds (lfcl.outputs.files.KINDS, repeated here so that `lfcl --help` does not import numpy).
-OUTPUTS = ("center", "mean", "views", "views-each", "refocus", "lightfield", "depth")
 
-#: Options a ``--recipe`` supplies when not given (parameter name -> recipe key).
-RECIPE_KEYS = {"method": "method", "strength": "strength", "lam": "lambda", "iterations": "iterations",
-               "outputs": "outputs", "refocus_spec": "refocus", "fmt": "format", "previews": "previews"}
+def _click_option(flag: str, name: str, param: Param, default):
+    """One click option of a schema field (or of an alias of one): lfcl/pipeline/parameters.py says what."""
+    kind = param.cli_kind or param.kind
+    bounds = param.cli_bounds or param.bounds
+    kwargs: dict = {"default": default, "help": param.help}
+    if default is not None:
+        kwargs["show_default"] = True
+    elif param.show_default:
+        kwargs["show_default"] = param.show_default
+    if param.choices:
+        kwargs["type"] = click.Choice(param.choices)
+    elif kind == "path":
+        kwargs["type"] = click.Path(path_type=Path, readable=False)
+    elif kind in (int, float) and bounds is not None:
+        kwargs["type"] = (click.IntRange if kind is int else click.FloatRange)(
+            min=bounds.low, max=bounds.high, min_open=bounds.low_open, max_open=bounds.high_open)
+    elif kind in (int, float):
+        kwargs["type"] = kind
+    if param.metavar:
+        kwargs["metavar"] = param.metavar
+    if param.hidden:
+        kwargs["hidden"] = True
+    return click.option(flag, name, **kwargs)
+
+
+def _schema_options() -> list:
+    """The click options of every stage's schema fields (and their aliases, e.g. ``--flat-p``)."""
+    out = []
+    for e in entries():
+        if e.param.cli:
+            out.append(_click_option(e.flag, e.cli_name, e.param, e.cli_default))
+            out.extend(_click_option(a.flag, a.cli_name, a, None) for a in e.param.aliases)
+    return out
+
 
 _OPTIONS = (
-    click.option("--method", default=DEFAULT_METHOD, show_default=True,
-                 type=click.Choice(METHODS),
-                 help="Demosaic/denoise method. auto: chosen from the raw's noise level, judged on --outputs "
-                      "(center alone: the centre view; mean/refocus alone: the mean image; else both; docs/auto.md)."),
-    click.option("--pitch", default=None, type=click.IntRange(min=2), show_default=str(DEFAULT_PITCH),
-                 help="Pixels per microlens of an aligned square grid starting at the sensor's first pixel "
-                      "(not with --calibration / --white)."),
-    click.option("--calibration", type=click.Path(path_type=Path, readable=False), default=None,
-                 metavar="CAL.json",
-                 help="Lens grid from `lfcl calibrate`. An aligned square grid of integer pitch is sliced exactly; "
-                      "a rotated, non-integer-pitch or hexagonal one is resampled inside the solver "
-                      "(docs/geometry.md; methods auto, malvar, admm-uv, admm-st, admm-uvst)."),
-    click.option("--white", type=click.Path(path_type=Path, readable=False), default=None, metavar="WHITE",
-                 help="Calibrate from this white image first (as `lfcl calibrate WHITE`), then as --calibration."),
-    click.option("--pattern", default=None, help="Bayer pattern; required for EXR/TIFF/PNG mosaics, read from raws."),
-    click.option("--outputs", default=DEFAULT_OUTPUTS, show_default=True,
-                 help=f"Comma-separated: {', '.join(OUTPUTS)}. Only these are computed."),
-    click.option("--refocus", "refocus_spec", default=None, metavar="START:STOP:STEP|A,B,..",
-                 help=f"Refocus slopes (lenses per view step): a range, stop included when on the grid, or a "
-                      f"comma list. Implies the refocus output; refocus without it uses {DEFAULT_REFOCUS}."),
-    click.option("--format", "fmt", default="exr", show_default=True, type=click.Choice(["exr", "tiff", "dng"]),
-                 help="Images: EXR (float, scene-linear), TIFF (16-bit linear, clipped to [0, 1]) or DNG "
-                      "(LinearRaw for raw editors, with the raw's colour matrix and white balance; "
-                      "docs/darktable.md)."),
-    click.option("--previews/--no-previews", default=True, show_default=True,
-                 help="Also write an 8-bit sRGB PNG of every image (white balance and colour matrix from the raw)."),
-    click.option("--lambda", "lam", default=None, type=float,
-                 help="TV weight; default: follows the noise level estimated from the raw (docs/admm.md)."),
-    click.option("--iterations", default=None, type=click.IntRange(min=1),
-                 help="Run exactly this many ADMM iterations; default: the method's early-stopping rule."),
-    click.option("--strength", default=1.0, show_default=True, type=float, help="Multiplier on the default lambda."),
-    click.option("--tolerance-db", "tolerance_db", default=None, type=click.FloatRange(min=0, min_open=True),
-                 metavar="DB",
-                 help="Stop the ADMM iterations once one can move PSNR by less than DB dB (docs/auto.md); "
-                      "default: the method's own stopping rule. With --iterations: at most that many."),
-    click.option("--start", default=None, type=click.Choice(STARTS),
-                 help="First estimate of the ADMM methods: malvar (the paper's), linear4d (the learned 4D "
-                      "filter; gains on textured and multi-plane scenes), lens-malvar (Malvar bounded to each "
-                      "lens; gains on the mean image) or guarded (linear4d, with Malvar in the lenses where it "
-                      "breaks: high-contrast edges, clipped highlights), docs/auto.md. Default: malvar; with "
-                      "--method auto, the start its rule names."),
-    click.option("--skip-flat/--solve-flat", "skip_flat", default=None, hidden=True,  # measured: off by default
-                 help="Flat lenses (constant per colour within the noise: a chi-square test against the raw's "
-                      "noise model) get their colour means and leave the ADMM solve (admm-uv, admm-uv-xc, auto's "
-                      "picks; docs/auto.md). Default: solve every lens (the test took fine texture for noise)."),
-    click.option("--safety-net/--no-safety-net", "safety_net", default=True, show_default=True,
-                 help="Keep every lens's colour means within the noise of Malvar's (lfcl/demosaic/safety_net.py; "
-                      "docs/auto.md): never a mean image worse than Malvar's."),
-    click.option("--flat-p", "flat_p", default=None, hidden=True, type=click.FloatRange(min=0, max=1, min_open=True, max_open=True),
-                 metavar="P",
-                 help=f"A lens is flat when its chi-square p-value is above P (default {FLAT_P:g}); implies --skip-flat."),
-    click.option("--max-memory", default=None, type=click.FloatRange(min=0.01), metavar="GIB",
-                 help="Device memory the solver may use, GiB; default 80% of the device's. A larger admm-uv "
-                      "problem runs in bands of lens rows (exact: the (u, v) prior couples no two lenses)."),
+    *_schema_options(),
     click.option("--recipe", "pipeline", default=None, metavar="NAME|PATH",
-                 help="A recipe (default, lowlight, preview, or a .toml file; docs/stages.md) supplying defaults "
-                      "for --method, --strength, --lambda, --iterations, --outputs, --refocus, --format, "
-                      "--previews; options given on the command line win."),
+                 help=f"A recipe ({', '.join(PACKAGED)}, or a .toml file; docs/stages.md) supplying defaults "
+                      f"for {', '.join(e.flag.split('/')[0] for e in recipe_entries())}; options given on the "
+                      "command line win."),
     device_option,
 )
+
+
+def _field_value(name: str, value):
+    """A click value -> the field's (``Param.cli_scale``: ``--max-memory`` GiB -> bytes)."""
+    scale = next(e.param.cli_scale for e in entries() if e.cli_name == name)
+    return value if value is None or scale is None else int(value * scale)
 
 
 def process_options(func):
@@ -114,28 +107,29 @@ class ProcessSettings:
     ``refocus``: the slopes spec (None when refocus is not among the outputs);
     ``max_memory``: bytes or None; ``tolerance_db``: the ADMM stop in dB or None (the
     method's rule); ``start``: the ADMM methods' first estimate or None (the method's); ``recipe``: what the outputs record about a
-    ``--recipe`` (name, path, options, from_command_line) or None.
+    ``--recipe`` (name, path, options, from_command_line) or None. Defaults: the stages' schemas
+    (lfcl/pipeline/parameters.py).
     """
 
-    method: str = DEFAULT_METHOD
+    method: str = defaults(DemosaicParameters)["method"]
     pitch: int | None = None
     calibration: str | None = None
     white: str | None = None
     pattern: str | None = None
-    outputs: tuple = ("center", "mean", "lightfield")
+    outputs: tuple = defaults(OutputParameters)["outputs"]
     refocus: str | None = None
-    fmt: str = "exr"
-    previews: bool = True
+    fmt: str = defaults(OutputParameters)["fmt"]
+    previews: bool = defaults(OutputParameters)["previews"]
     lam: float | None = None
     iterations: int | None = None
-    strength: float = 1.0
+    strength: float = defaults(DemosaicParameters)["strength"]
     max_memory: int | None = None
     device: str | None = None
     recipe: dict | None = None
     tolerance_db: float | None = None
     start: str | None = None
     skip_flat: bool | float | None = None
-    safety_net: bool = True
+    safety_net: bool = defaults(DemosaicParameters)["safety_net"]
 
     def pipeline(self, callback=None):
         """The :class:`lfcl.pipeline.stages.Pipeline` of these settings; ``callback``: per ADMM iteration (progress)."""
@@ -164,8 +158,7 @@ def settings_from_options(options: dict, ctx: click.Context | None = None) -> Pr
     With ``pipeline`` (a recipe), the recipe's values replace the options that were not
     given on the command line (``ctx``'s parameter sources tell which were).
     """
-    method, strength, lam, iterations = options["method"], options["strength"], options["lam"], options["iterations"]
-    outputs, refocus_spec, fmt, previews = options["outputs"], options["refocus_spec"], options["fmt"], options["previews"]
+    values = {param: options[param] for param in RECIPE_KEYS}
     recipe_meta = None
     if options["pipeline"] is not None:
         from click.core import ParameterSource
@@ -176,26 +169,19 @@ def settings_from_options(options: dict, ctx: click.Context | None = None) -> Pr
         ctx = ctx or click.get_current_context()
         explicit = {p for p in RECIPE_KEYS if ctx.get_parameter_source(p) not in (ParameterSource.DEFAULT,
                                                                                  ParameterSource.DEFAULT_MAP)}
-        values = {"method": method, "strength": strength, "lam": lam, "iterations": iterations, "outputs": outputs,
-                  "refocus_spec": refocus_spec, "fmt": fmt, "previews": previews}
         for param, key in RECIPE_KEYS.items():
             if param in explicit:
                 continue
-            if param == "outputs":
-                values[param] = ",".join(recipe["outputs"])
-            elif param == "refocus_spec":
+            if param == "refocus_spec":  # --refocus asks for the refocus output; a recipe's slopes serve where it does
                 if "refocus" in recipe["outputs"]:
-                    values[param] = recipe["refocus"]
-            else:
-                values[param] = recipe[key]
-        method, strength, lam, iterations = values["method"], values["strength"], values["lam"], values["iterations"]
-        outputs, refocus_spec, fmt, previews = (values["outputs"], values["refocus_spec"], values["fmt"],
-                                                values["previews"])
+                    values[param] = recipe[key]
+            else:  # a list (outputs) as the comma list the option takes
+                values[param] = ",".join(recipe[key]) if isinstance(recipe[key], list) else recipe[key]
         recipe_meta = {"name": recipe["name"], "path": recipe["path"],
-                       "options": {"method": method, "strength": strength, "lambda": lam,
-                                   "iterations": iterations, "outputs": outputs, "refocus": refocus_spec,
-                                   "format": fmt, "previews": previews},
+                       "options": {key: values[param] for param, key in RECIPE_KEYS.items()},
                        "from_command_line": sorted(RECIPE_KEYS[p] for p in explicit)}
+    method, strength, lam, iterations = values["method"], values["strength"], values["lam"], values["iterations"]
+    outputs, refocus_spec, fmt, previews = values["outputs"], values["refocus_spec"], values["fmt"], values["previews"]
     from ...outputs.files import parse_format, parse_outputs
     from ...outputs.refocus import parse_slopes
 
@@ -230,7 +216,7 @@ def settings_from_options(options: dict, ctx: click.Context | None = None) -> Pr
         method=method, pitch=pitch, calibration=None if calibration is None else str(calibration),
         white=None if white is None else str(white), pattern=options["pattern"], outputs=tuple(wanted),
         refocus=refocus_spec, fmt=fmt, previews=bool(previews), lam=lam, iterations=iterations,
-        strength=float(strength), max_memory=None if max_memory is None else int(max_memory * 2**30),
+        strength=float(strength), max_memory=_field_value("max_memory", max_memory),
         device=options["device"], recipe=recipe_meta,
         tolerance_db=None if tolerance_db is None else float(tolerance_db), start=options.get("start"),
         skip_flat=skip_flat, safety_net=bool(options.get("safety_net", True)))
