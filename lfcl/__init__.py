@@ -68,12 +68,13 @@ def lightfield(raw, *, pitch: int | None = None, calibration=None, white=None, p
     pattern : str, optional
         The Bayer pattern of an image mosaic or array.
     method : str, optional
-        One of ``lfcl.demosaic.names.METHODS``; default ``auto`` (docs/auto.md).
+        ``METHOD[:START]``: one of ``lfcl.demosaic.names.METHODS``, optionally with the ADMM methods' first
+        estimate (``lfcl.demosaic.names.STARTS``), as ``admm-uv-xc:guarded``; default ``auto`` (docs/auto.md).
     device : str or int, optional
         An OpenCL device (``lfcl devices``); default ``LFCL_DEVICE`` or the first device.
     **options
         The Demosaic stage's options: ``lam``, ``iterations``, ``strength``, ``tolerance_db``,
-        ``start``, ``skip_flat``, ``safety_net``, ``max_memory`` (lfcl/pipeline/stages.py).
+        ``skip_flat``, ``safety_net``, ``max_memory`` (lfcl/pipeline/stages.py).
 
     Returns
     -------
@@ -111,8 +112,8 @@ def process(path, out_dir, recipe="default", **overrides) -> dict:
     recipe : str, os.PathLike or dict
         A packaged recipe (``default``, ``lowlight``, ``preview``), a ``.toml`` file or a dict (docs/stages.md).
     **overrides
-        Recipe keys (``method``, ``strength``, ``lam``, ``iterations``, ``outputs``, ``refocus``, ``fmt``,
-        ``previews``) and ``pattern``, ``pitch``, ``calibration``, ``white``, ``device``.
+        Recipe keys (``method``, as ``METHOD[:START]``, ``strength``, ``lam``, ``iterations``, ``outputs``,
+        ``refocus``, ``fmt``, ``previews``) and ``pattern``, ``pitch``, ``calibration``, ``white``, ``device``.
 
     Returns
     -------

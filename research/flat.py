@@ -23,6 +23,7 @@ import numpy as np
 
 from lfcl.bench.timing import add_capture_arguments, captures
 from lfcl.demosaic.driver import demosaic_grid
+from lfcl.demosaic.names import parse_method_spec
 from lfcl.evaluation.metrics import lightfield_scores
 from lfcl.grid.model import AlignedGrid
 from lfcl.io.images import write_json
@@ -31,8 +32,8 @@ from lfcl.noise.model import from_noise_profile
 
 
 def measure(capture, label: str, repeats: int, threshold: float | None = None) -> dict:
-    """Every lens solved against flat lenses skipped, for one method (``NAME`` or ``NAME:START``)."""
-    method, _, start = label.partition(":")
+    """Every lens solved against flat lenses skipped, for one method (``METHOD[:START]``)."""
+    method, start = parse_method_spec(label)
     noise = from_noise_profile(capture.noise_profile, capture.mosaic)
     shape = LightFieldShape.from_exchange(capture.truth)
     settings = {"solve": False, "skip": threshold if threshold is not None else True}
@@ -40,7 +41,7 @@ def measure(capture, label: str, repeats: int, threshold: float | None = None) -
     def run(skip_flat):
         began = time.perf_counter()
         result = demosaic_grid(capture.mosaic, capture.pattern, AlignedGrid(capture.pitch), method, noise=noise,
-                               start=start or None, skip_flat=skip_flat)
+                               start=start, skip_flat=skip_flat)
         return time.perf_counter() - began, result
 
     for skip_flat in settings.values():  # warm-up: program builds, packed sizes

@@ -54,6 +54,16 @@ def test_parse_candidate():
     assert parse_candidate("admm-uv@0.5") == ("admm-uv", 0.5, "malvar")
     assert parse_candidate("malvar") == ("malvar", 1.0, "malvar")
     assert parse_candidate("admm-uv-xc@2:linear4d") == ("admm-uv-xc", 2.0, "linear4d")
+    assert parse_candidate("admm-uv-xc:guarded") == ("admm-uv-xc", 1.0, "guarded")
+    # the method and its start are lfcl.demosaic.names.parse_method_spec's METHOD[:START]; @strength a number > 0
+    for bad, words in (("admm-uv@1:nearest", "unknown start 'nearest' in method 'admm-uv:nearest': expected "
+                                             "METHOD:START with START one of malvar, linear4d, lens-malvar, guarded"),
+                       ("bilinear@1", "unknown method 'bilinear': expected one of auto, malvar, "),
+                       ("admm-uv@x", "candidate 'admm-uv@x': the strength after @ must be a number > 0, got 'x'"),
+                       ("admm-uv@0:linear4d", "must be a number > 0, got '0'")):
+        with pytest.raises(ValueError) as info:
+            parse_candidate(bad)
+        assert words in str(info.value), bad
 
 
 def test_fit_rule_takes_the_best_worst_case_and_breaks_ties_by_the_median():

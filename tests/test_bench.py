@@ -136,7 +136,11 @@ def test_bench_pareto_takes_an_admm_method_with_its_start(tmp_path):
     assert points["admm-uv:linear4d"]["psnr_center"] != points["admm-uv"]["psnr_center"]
     bad = _invoke(["bench", "pareto", "--lenses", "8x8", "--budgets", "1", "--methods", "admm-uv:nearest",
                    "-o", str(tmp_path / "q")])
-    assert bad.exit_code != 0 and "NAME:START" in bad.output
+    assert bad.exit_code != 0 and "unknown ADMM method(s) admm-uv:nearest" in bad.output
+    assert "optionally METHOD:START with START one of malvar, linear4d, lens-malvar, guarded" in bad.output
+    bad = _invoke(["bench", "pareto", "--lenses", "8x8", "--budgets", "1", "--methods", "malvar:linear4d",
+                   "-o", str(tmp_path / "r")])  # a spelling parse_method_spec takes, but no ADMM method
+    assert bad.exit_code != 0 and "unknown ADMM method(s) malvar:linear4d" in bad.output
 
 
 def test_bench_matrix_rows_and_the_worst_cell_first(tmp_path):

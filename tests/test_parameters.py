@@ -65,6 +65,40 @@ def test_the_options_keep_their_spellings():
     assert flags["previews"] == ["--previews", "--no-previews"]
     hidden = {p.name for p in process_command.command.params if getattr(p, "hidden", False)}
     assert hidden == {"skip_flat", "flat_p"}
+    # a method and its ADMM start are one option, --method METHOD[:START]: no --start
+    assert flags["method"] == ["--method"] and "start" not in flags
+    for command in (process_command.command, batch_command.command):
+        assert not [p for p in command.params if "--start" in p.opts + p.secondary_opts], command.name
+
+
+def test_a_method_and_its_start_are_one_spelling(tmp_path):
+    """``METHOD[:START]`` on the command line, in a recipe and in the Demosaic stage; the stage keeps them apart,
+    its options record the method's name as ``method`` and the start as ``start``."""
+    result = CliRunner().invoke(cli, ["process", "raw.dng", "-o", str(tmp_path / "out"), "--start", "guarded"])
+    assert result.exit_code == 2 and "No such option '--start'" in result.output
+    stage = Demosaic("admm-uv-xc:guarded")
+    assert (stage.method, stage.start) == ("admm-uv-xc", "guarded")
+    assert (stage.options()["method"], stage.options()["start"]) == ("admm-uv-xc", "guarded")
+    plain = Demosaic("admm-uv-xc")
+    assert (plain.method, plain.start, plain.options()["start"]) == ("admm-uv-xc", None, None)
+    with pytest.raises(TypeError, match="start"):
+        Demosaic("admm-uv-xc", start="guarded")
+    with pytest.raises(ValueError, match="^Demosaic: unknown start 'nearest' .*lens-malvar, guarded$"):
+        Demosaic("admm-uv:nearest")
+    recipe = tmp_path / "guarded.toml"
+    recipe.write_text('method = "admm-uv-xc:guarded"\n')
+    assert load_recipe(recipe)["method"] == "admm-uv-xc:guarded"
+    from_recipe = pipeline_from_recipe(recipe).options()
+    assert (from_recipe["method"], from_recipe["start"]) == ("admm-uv-xc", "guarded")
+    ctx = process_command.command.make_context("process", ["raw.dng", "-o", "out", "--method", "admm-uv-xc:guarded"])
+    settings = process_command.settings_from_options(ctx.params, ctx)
+    assert (settings.method, settings.start) == ("admm-uv-xc", "guarded")
+    assert settings.pipeline().options() == from_recipe
+    recipe.write_text('method = "admm-uv:nearest"\n')
+    with pytest.raises(ValueError, match="guarded.toml: method = 'admm-uv:nearest': must be one of auto, .*guarded$"):
+        load_recipe(recipe)
+    with pytest.raises(ValueError, match="unknown option 'start'"):
+        pipeline_from_recipe("default", start="guarded")
 
 
 def test_every_recipe_key_is_a_schema_field_and_a_click_option():
@@ -123,7 +157,7 @@ def test_defaults_agree_click_recipe_dataclass():
     (P.DemosaicParameters, {"strength": float("inf")}, "strength"),
     (P.DemosaicParameters, {"tolerance_db": 0}, "tolerance_db"),
     (P.DemosaicParameters, {"max_memory": 0}, "max_memory"),
-    (P.DemosaicParameters, {"start": "bilinear"}, "start"),
+    (P.DemosaicParameters, {"method": "admm-uv:bilinear"}, "method"),  # METHOD[:START]: the start is the method's
     (P.DemosaicParameters, {"skip_flat": 2.0}, "skip_flat"),
     (P.DemosaicParameters, {"safety_net": "yes"}, "safety_net"),
     (P.DemosaicParameters, {"auto_view": "left"}, "auto_view"),

@@ -188,7 +188,7 @@ def test_auto_names_and_runs_its_choice(grid, processed):
     assert (auto["method"], auto["strength"], auto["start"]) == (method, strength, start)
     assert summary["method"] == "auto" and f"auto -> {method}" in text and choice.reason[:40] in text
     # auto is its choice run at its strength and start: the same bytes as asking for that method
-    chosen, _, _ = processed(grid, method, "--strength", f"{strength:g}", "--start", start, "--outputs", "lightfield",
+    chosen, _, _ = processed(grid, f"{method}:{start}", "--strength", f"{strength:g}", "--outputs", "lightfield",
                              "--no-previews")
     assert (out / "lightfield.npy").read_bytes() == (chosen / "lightfield.npy").read_bytes()
 
@@ -300,8 +300,8 @@ def test_stage_contracts_of_the_resampled_kind(captures):
 def test_a_linear4d_start_on_a_resampled_grid_is_one_line_before_any_work(captures, tmp_path):
     out = tmp_path / "out"
     result = invoke("process", captures / "rotated" / "raw.dng", "--calibration", captures / "rotated" / "cal.json",
-                    "--method", "admm-uv", "--start", "linear4d", "-o", out)
-    assert result.exit_code != 0 and "--start linear4d needs an aligned square lens grid" in result.output
+                    "--method", "admm-uv:linear4d", "-o", out)
+    assert result.exit_code != 0 and "--method admm-uv:linear4d needs an aligned square lens grid" in result.output
     assert "Traceback" not in result.output and not out.exists()
 
 

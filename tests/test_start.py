@@ -13,9 +13,10 @@ from click.testing import CliRunner
 from lfcl.cli import cli
 from lfcl.demosaic.driver import demosaic_grid
 from lfcl.grid.model import AlignedGrid
-from lfcl.noise.model import NoiseEstimate
+from lfcl.noise.model import NoiseEstimate, from_noise_profile
 from lfcl.ops.linear4d import linear4d
 from lfcl.ops.malvar import malvar_np
+from lfcl.pipeline.stages import Decode, Grid
 from lfcl.solvers.params import AdmmParams
 from lfcl.solvers.reference import admm_reference
 
@@ -115,34 +116,77 @@ def test_a_bad_start_is_one_line(textured_mosaic):
         demosaic_grid(textured_mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv", start="bilinear")
 
 
-def test_process_start_option_reaches_the_solver_and_the_summary(tmp_path):
+def test_process_method_with_its_start_reaches_the_solver_and_the_summary(tmp_path):
+    """`lfcl process --method METHOD:START` (no --start): the start reaches the solver; summary.json records the
+    method's name as ``method`` and the start as ``parameters.start`` and ``options.start``."""
     capture = tmp_path / "cap"
     result = CliRunner().invoke(cli, ["simulate", "--scene", "deadleaves", "--lenses", "8x8", "--lux", "4",
                                       "--seed", "2", "-o", str(capture)])
     assert result.exit_code == 0, result.output
     summaries = {}
-    for start in ("malvar", "linear4d", "lens-malvar", "guarded"):
-        out = tmp_path / start
-        result = CliRunner().invoke(cli, ["process", str(capture / "raw.dng"), "--pitch", "9", "--method", "admm-uv",
-                                          "--start", start, "--outputs", "center", "--no-previews", "-o", str(out),
-                                          "--json"])
+    for method in ("admm-uv:malvar", "admm-uv:linear4d", "admm-uv:lens-malvar", "admm-uv:guarded",
+                   "admm-uv-xc:guarded"):
+        out = tmp_path / method.replace(":", "_")
+        result = CliRunner().invoke(cli, ["process", str(capture / "raw.dng"), "--pitch", "9", "--method", method,
+                                          "--outputs", "center,lightfield", "--no-previews", "-o", str(out), "--json"])
         assert result.exit_code == 0, result.output
-        summaries[start] = json.loads(result.output)
-    assert summaries["linear4d"]["parameters"]["start"] == "linear4d"
-    assert summaries["malvar"]["parameters"]["start"] == "malvar"
-    assert summaries["lens-malvar"]["parameters"]["start"] == "lens-malvar"
-    assert summaries["guarded"]["parameters"]["start_guard"]["lenses"] == 64
-    result = CliRunner().invoke(cli, ["process", str(capture / "raw.dng"), "--start", "nearest", "-o",
+        summaries[method] = json.loads(result.output)
+    # the same light field as demosaic_grid's start= keyword gives, from the stages' decoded and gridded raw
+    gridded = Grid(pitch=9)(Decode()(capture / "raw.dng"))
+    noise = from_noise_profile(gridded.mosaic.noise_profile, gridded.data)
+    for method, start in (("admm-uv-xc", "guarded"), ("admm-uv", "linear4d")):
+        direct = demosaic_grid(gridded.data, gridded.mosaic.pattern, gridded.grid, method, noise=noise, start=start)
+        cli_lightfield = np.load(tmp_path / f"{method}_{start}" / "lightfield.npy")
+        np.testing.assert_array_equal(cli_lightfield, direct.lightfield)
+    assert summaries["admm-uv:linear4d"]["parameters"]["start"] == "linear4d"
+    assert summaries["admm-uv:malvar"]["parameters"]["start"] == "malvar"
+    assert summaries["admm-uv:lens-malvar"]["parameters"]["start"] == "lens-malvar"
+    assert summaries["admm-uv:guarded"]["parameters"]["start_guard"]["lenses"] == 64
+    guarded = summaries["admm-uv-xc:guarded"]
+    assert guarded["method"] == "admm-uv-xc" and guarded["parameters"]["start"] == "guarded"
+    assert guarded["options"]["method"] == "admm-uv-xc" and guarded["options"]["start"] == "guarded"
+    assert guarded["parameters"]["start_guard"]["lenses"] == 64
+    malvar = summaries["admm-uv:malvar"]
+    assert malvar["method"] == "admm-uv" and malvar["options"]["start"] == "malvar"
+    result = CliRunner().invoke(cli, ["process", str(capture / "raw.dng"), "--method", "admm-uv:nearest", "-o",
                                       str(tmp_path / "bad")])
-    assert result.exit_code != 0 and "nearest" in result.output and not (tmp_path / "bad").exists()
+    assert result.exit_code != 0 and "unknown start 'nearest'" in result.output and "lens-malvar" in result.output
+    assert len(result.output.strip().splitlines()) == 1 and not (tmp_path / "bad").exists()
+    result = CliRunner().invoke(cli, ["process", str(capture / "raw.dng"), "--method", "admm-uv", "--start", "guarded",
+                                      "-o", str(tmp_path / "gone")])
+    assert result.exit_code == 2 and "No such option '--start'" in result.output and not (tmp_path / "gone").exists()
+
+
+def test_parse_method_spec_is_the_one_spelling():
+    from lfcl.demosaic.names import method_spec, parse_method_spec
+
+    assert parse_method_spec("admm-uv-xc:guarded") == ("admm-uv-xc", "guarded")
+    assert parse_method_spec("auto:lens-malvar") == ("auto", "lens-malvar")
+    assert parse_method_spec("malvar") == ("malvar", None)
+    assert method_spec("admm-uv-xc", "guarded") == "admm-uv-xc:guarded" and method_spec("admm-uv") == "admm-uv"
+    for bad, words in (("bilinear", "unknown method 'bilinear': expected one of auto, malvar, admm-uv, "),
+                       ("admm-uv:nearest", "unknown start 'nearest' in method 'admm-uv:nearest': expected "
+                                           "METHOD:START with START one of malvar, linear4d, lens-malvar, guarded"),
+                       ("admm-uv:", "unknown start ''"), ("admm-uv:guarded:x", "unknown start 'guarded:x'"),
+                       ("admm-uv guarded", "unknown method 'admm-uv guarded'"), (None, "METHOD[:START], got None"),
+                       ("malvar:guarded", "malvar takes no start"), ("linear4d:malvar", "linear4d takes no start")):
+        with pytest.raises(ValueError) as info:
+            parse_method_spec(bad)
+        assert words in str(info.value) and "\n" not in str(info.value), bad
+    with pytest.raises(ValueError, match="unknown start 'nearest'"):
+        method_spec("admm-uv", "nearest")
 
 
 def test_evaluate_takes_a_method_with_its_start(tmp_path):
     from lfcl.evaluation.evaluate import check_methods
 
     assert check_methods(["admm-uv-xc:linear4d", "malvar"]) == ["admm-uv-xc:linear4d", "malvar"]
-    with pytest.raises(ValueError, match="goes with an ADMM method only"):
+    with pytest.raises(ValueError, match="malvar takes no start"):
         check_methods(["malvar:linear4d"])
+    with pytest.raises(ValueError, match="goes with an ADMM method only"):
+        check_methods(["auto:linear4d"])
+    with pytest.raises(ValueError, match="unknown start 'nearest' .* lens-malvar, guarded$"):
+        check_methods(["admm-uv:nearest"])
     capture = tmp_path / "cap"
     assert CliRunner().invoke(cli, ["simulate", "--lenses", "6x6", "--lux", "8", "-o", str(capture)]).exit_code == 0
     result = CliRunner().invoke(cli, ["evaluate", str(capture), "--methods", "admm-uv,admm-uv:linear4d", "--json"])

@@ -6,8 +6,8 @@ the centre view, PSNR of the mean image), with two peers timed in the same run:
 
 * ``malvar``, ``linear4d``: lfcl's OpenCL Malvar-He-Cutler and learned 4D filter (one
   point each; no iterations);
-* ``admm-uv``, ``admm-st``, ``admm-uvst``, ... (any ADMM method, optionally ``NAME:START``,
-  e.g. ``admm-uv-xc:linear4d``): ``lfcl.demosaic.driver.demosaic_grid`` with
+* ``admm-uv``, ``admm-st``, ``admm-uvst``, ... (any ADMM method, ``METHOD[:START]`` as
+  ``lfcl process --method`` takes it, e.g. ``admm-uv-xc:linear4d``): ``lfcl.demosaic.driver.demosaic_grid`` with
   ``iterations=k`` (no early stop), the noise level from the capture's DNG noise
   profile as ``lfcl.evaluation.evaluate.run_method`` does;
 * ``colour-demosaicing Malvar2004``: ``demosaicing_CFA_Bayer_Malvar2004`` on the
@@ -36,6 +36,7 @@ import numpy as np
 
 from ..demosaic.driver import demosaic_grid
 from ..demosaic.methods import ADMM_DEFAULTS, STARTS, admm_params
+from ..demosaic.names import parse_method_spec
 from ..evaluation.evaluate import Capture, capture_in_memory, load_capture
 from ..evaluation.metrics import lightfield_scores
 from ..grid.model import AlignedGrid
@@ -109,6 +110,15 @@ def mark_front(points: list[dict], key: str = "psnr_center", tolerance_db: float
         p["front"] = not any(q is not p and beats(q, p) for q in points)
 
 
+def _admm_method(label: str) -> str | None:
+    """The ADMM method of ``METHOD[:START]`` (lfcl.demosaic.names.parse_method_spec), None for any other."""
+    try:
+        method, _ = parse_method_spec(label)
+    except ValueError:
+        return None
+    return method if method in ADMM_METHODS else None
+
+
 def run(capture: Capture, budgets, reference_budgets=None, methods=ADMM_METHODS, repeats: int = 1,
         device=None, progress=None, skip_flat: bool | None = None) -> dict:
     """Every (method, budget) point and the peers on ``capture``; a JSON-ready dict.
@@ -129,10 +139,10 @@ def run(capture: Capture, budgets, reference_budgets=None, methods=ADMM_METHODS,
         raise ValueError(f"budgets must be positive integers, got {budgets}")
     if reference_budgets is None:
         reference_budgets = [b for b in budgets if b <= REFERENCE_MAX_BUDGET] or budgets[:1]
-    unknown = [m for m in methods if m.partition(":")[0] not in ADMM_METHODS or m.partition(":")[2] not in ("", *STARTS)]
+    unknown = [m for m in methods if _admm_method(m) is None]
     if unknown:
         raise ValueError(f"unknown ADMM method(s) {', '.join(unknown)}: expected {', '.join(ADMM_METHODS)}, "
-                         f"optionally NAME:START with START one of {', '.join(STARTS)}")
+                         f"optionally METHOD:START with START one of {', '.join(STARTS)}")
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     runtime = get_runtime(device)
@@ -145,9 +155,9 @@ def run(capture: Capture, budgets, reference_budgets=None, methods=ADMM_METHODS,
         return lightfield_scores(planes_to_exchange(np.asarray(planes, np.float32), shape), capture.truth)
 
     def lfcl_method(label, iterations=None):
-        method, _, start = label.partition(":")
+        method, start = parse_method_spec(label)
         return demosaic_grid(mosaic, pattern, AlignedGrid(pitch), method, iterations=iterations,
-                             noise=None if method == "malvar" else noise, device=device, start=start or None,
+                             noise=None if method == "malvar" else noise, device=device, start=start,
                              skip_flat=skip_flat if iterations is not None else None)
 
     points = []

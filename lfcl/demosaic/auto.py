@@ -34,6 +34,8 @@ import math
 import statistics
 from importlib import resources
 
+from .names import parse_method_spec
+
 RULE_FILE = "auto_rule.json"
 #: What ``auto`` runs when the rule names a method that cannot run on the raw at hand (linear4d
 #: on a pitch without coefficients, a method a resampled grid lacks): the method that gained
@@ -195,14 +197,23 @@ def fit_rules(rows: list[dict], tie_db: float = TIE_DB) -> dict:
 
 
 def parse_candidate(name: str) -> tuple[str, float, str]:
-    """'method[@strength][:start]' -> (method, strength, start).
+    """'method[@strength][:start]' -> (method, strength, start): the method and its start are
+    lfcl.demosaic.names.parse_method_spec's ``METHOD[:START]`` (checked there), ``@strength`` multiplies the
+    default lambda.
 
     'admm-uv@2' -> ('admm-uv', 2.0, 'malvar'); 'admm-uv-xc@1:linear4d' -> ('admm-uv-xc', 1.0, 'linear4d');
     'malvar' -> ('malvar', 1.0, 'malvar').
     """
-    name, _, start = name.partition(":")
-    method, _, strength = name.partition("@")
-    return method, float(strength) if strength else 1.0, start or "malvar"
+    head, colon, start = name.partition(":")
+    method, at, strength = head.partition("@")
+    method, start = parse_method_spec(method + colon + start)
+    try:
+        value = float(strength) if at else 1.0
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"candidate {name!r}: the strength after @ must be a number > 0, got {strength!r}")
+    return method, value, start or "malvar"
 
 
 def band_for(sigma: float, rule=None, view: str = "both") -> tuple[dict, str]:

@@ -179,4 +179,5 @@ def demosaic_grid(mosaic: np.ndarray, pattern: str | None, grid, method: str, *,
         result = with_safety_net(result, mosaic, pattern, grid.pitch, grid.origin, grid.lens_response, device)
     if auto is not None:
         result.parameters = {**result.parameters, "auto": auto.record}
+    result.device = device
     return result

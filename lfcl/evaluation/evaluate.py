@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..demosaic.driver import demosaic_grid
-from ..demosaic.methods import METHODS, parse_method
+from ..demosaic.names import METHODS, method_spec, parse_method_spec
 from ..grid.model import AlignedGrid
 from ..io.raw import read_mosaic
 from ..layout import DIMS, LightFieldShape, planes_to_exchange
@@ -58,11 +58,12 @@ def load_capture(directory) -> Capture:
 
 
 def run_method(capture: Capture, method: str, device=None, **overrides) -> dict:
-    """Demosaic the capture with ``method`` (a name, or ``NAME:START``); scores, timings and the light field."""
+    """Demosaic the capture with ``method`` (``METHOD[:START]``, lfcl.demosaic.names.parse_method_spec); scores,
+    timings and the light field."""
     from ..noise.model import from_noise_profile
 
-    label, (method, _, start) = method, method.partition(":")
-    if start:
+    label, (method, start) = method, parse_method_spec(method)
+    if start is not None:
         overrides = {**overrides, "start": start}
     noise = None
     if capture.noise_profile is not None and method != "malvar":
@@ -152,7 +153,7 @@ def write_figures(capture: Capture, results: list[dict], out: Path, label: str) 
 
 
 def check_methods(methods) -> list[str]:
-    """Method names, each optionally ``NAME:START`` (an ADMM method from another start, lfcl.demosaic.methods.STARTS)."""
+    """Methods, each ``METHOD[:START]`` (lfcl.demosaic.names.parse_method_spec; a start with an ADMM method only)."""
     from ..demosaic.methods import ADMM_DEFAULTS, STARTS
 
     methods = [m.strip() for m in methods if m.strip()]
@@ -160,12 +161,11 @@ def check_methods(methods) -> list[str]:
         raise ValueError(f"no methods given: choose from {', '.join(METHODS)}")
     checked = []
     for label in methods:
-        name, _, start = label.partition(":")
-        name = parse_method(name)
-        if start and (start not in STARTS or name not in ADMM_DEFAULTS):
+        name, start = parse_method_spec(label)
+        if start is not None and name not in ADMM_DEFAULTS:
             raise ValueError(f"{label!r}: a start ({', '.join(STARTS)}) goes with an ADMM method only, as "
                              f"admm-uv-xc:linear4d")
-        checked.append(f"{name}:{start}" if start else name)
+        checked.append(method_spec(name, start))
     return checked
 
 

@@ -27,7 +27,7 @@ import numbers
 import os
 from typing import Any, NamedTuple
 
-from ..demosaic.names import DEFAULT_METHOD, FLAT_P, METHODS, STARTS
+from ..demosaic.names import DEFAULT_METHOD, FLAT_P, METHODS, STARTS, parse_method_spec
 
 #: The aligned square grid's pitch when no lens grid is given (the Grid stage).
 DEFAULT_PITCH = 9
@@ -254,9 +254,14 @@ class DemosaicParameters(_Schema):
     """The Demosaic stage (what each does: lfcl.pipeline.stages.Demosaic, docs/admm.md, docs/auto.md)."""
 
     method: str = param(
-        DEFAULT_METHOD, kind="choice", choices=METHODS, recipe=1,
-        help="Demosaic/denoise method. auto: chosen from the raw's noise level, judged on --outputs "
-             "(center alone: the centre view; mean/refocus alone: the mean image; else both; docs/auto.md).")
+        DEFAULT_METHOD, recipe=1, metavar="METHOD[:START]",
+        help=f"Demosaic/denoise method ({', '.join(METHODS)}), optionally with the ADMM methods' first "
+             f"estimate START ({', '.join(STARTS)}), as admm-uv-xc:guarded. auto: chosen from the raw's noise "
+             "level, judged on --outputs (center alone: the centre view; mean/refocus alone: the mean image; else "
+             "both; docs/auto.md). START: malvar (the paper's, the default; with auto, the start its rule "
+             "names), linear4d (the learned 4D filter; gains on textured and multi-plane scenes), lens-malvar "
+             "(Malvar bounded to each lens; gains on the mean image) or guarded (linear4d, with Malvar in the "
+             "lenses where it breaks: high-contrast edges, clipped highlights), docs/auto.md.")
     lam: float | None = param(
         None, kind=float, bounds=Bounds(0), key="lambda", recipe=3,
         help="TV weight; default: follows the noise level estimated from the raw (docs/admm.md).")
@@ -273,13 +278,6 @@ class DemosaicParameters(_Schema):
         None, kind=int, bounds=Bounds(1), cli_kind=float, cli_bounds=Bounds(0.01), cli_scale=2**30, metavar="GIB",
         help="Device memory the solver may use, GiB; default 80% of the device's. A larger admm-uv "
              "problem runs in bands of lens rows (exact: the (u, v) prior couples no two lenses).")
-    start: str | None = param(
-        None, kind="choice", choices=STARTS,
-        help="First estimate of the ADMM methods: malvar (the paper's), linear4d (the learned 4D "
-             "filter; gains on textured and multi-plane scenes), lens-malvar (Malvar bounded to each "
-             "lens; gains on the mean image) or guarded (linear4d, with Malvar in the lenses where it "
-             "breaks: high-contrast edges, clipped highlights), docs/auto.md. Default: malvar; with "
-             "--method auto, the start its rule names.")
     skip_flat: bool | float | None = param(  # measured: off by default, so hidden
         None, cli_kind=bool, flag="--skip-flat/--solve-flat", hidden=True,
         help="Flat lenses (constant per colour within the noise: a chi-square test against the raw's "
@@ -298,12 +296,23 @@ class DemosaicParameters(_Schema):
         help="With auto, the view its rule is judged on (lfcl.demosaic.auto.VIEWS); `lfcl process` passes "
              "lfcl.demosaic.auto.view_for_outputs of its outputs. Recorded for auto only.")
 
+    @property
+    def method_and_start(self) -> tuple[str, str | None]:
+        """``method`` (``METHOD[:START]``) split: the method's name and its start or None (the method's)."""
+        return parse_method_spec(self.method)
+
     def _check(self):
+        try:
+            method, _ = self.method_and_start
+        except ValueError as e:
+            raise _entry(DemosaicParameters, "method").error(
+                self.method, f"must be one of {', '.join(METHODS)}, optionally METHOD:START with START one of "
+                             f"{', '.join(STARTS)}", str(e)) from None
         if self.skip_flat is not None and self.skip_flat is not False:
             from ..demosaic.methods import flat_threshold_for
 
             try:  # auto passes it on to the method it picks, so check the value as for admm-uv
-                flat_threshold_for("admm-uv" if self.method == "auto" else self.method, self.skip_flat)
+                flat_threshold_for("admm-uv" if method == "auto" else method, self.skip_flat)
             except ValueError as e:
                 raise _entry(DemosaicParameters, "skip_flat").error(self.skip_flat, str(e), str(e)) from None
         from ..demosaic.auto import VIEWS, check_view
@@ -315,9 +324,16 @@ class DemosaicParameters(_Schema):
                 self.auto_view, f"must be one of {', '.join(VIEWS)}", str(e)) from None
 
     def options(self) -> dict:
-        out = super().options()
-        if self.method != "auto":
-            out.pop("auto_view")
+        """As ``summary.json`` records them: ``method`` the name and ``start`` (None: the method's) apart, after
+        ``max_memory``; ``auto_view`` for auto only."""
+        method, start = self.method_and_start
+        out: dict = {}
+        for key, value in super().options().items():
+            if key == "auto_view" and method != "auto":
+                continue
+            out[key] = method if key == "method" else value
+            if key == "max_memory":
+                out["start"] = start
         return out
 
 

@@ -4,7 +4,7 @@ A recipe is a flat TOML table; every key is optional and has a default (:data:`D
 defaults and their checks are the stages' (lfcl/pipeline/parameters.py, the fields marked ``recipe``)::
 
     description = "..."           # free text
-    method = "auto"               # any of lfcl.demosaic.names.METHODS
+    method = "auto"               # METHOD[:START], as admm-uv-xc:guarded (lfcl.demosaic.names.parse_method_spec)
     strength = 1.0                # > 0, multiplies the default lambda
     lambda = 0.01                 # >= 0; absent: follows the noise level
     iterations = 20               # >= 1; absent: the method's early-stopping rule
@@ -91,7 +91,7 @@ def pipeline_from_recipe(recipe, **overrides):
 
     ``overrides``: recipe keys (a field's name may stand for its key: ``lam`` for ``lambda``, ``fmt`` for
     ``format``), any other option of the stages (lfcl/pipeline/parameters.py: ``pattern``, ``pitch``,
-    ``calibration``, ``white``, ``tolerance_db``, ``start``, ...) and ``device``. Recipe keys are
+    ``calibration``, ``white``, ``tolerance_db``, ``skip_flat``, ...) and ``device``. Recipe keys are
     validated like the file's, the others by their stage; ``None`` leaves the recipe's value (or the default).
     """
     from ..demosaic.auto import view_for_outputs

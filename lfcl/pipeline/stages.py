@@ -254,8 +254,11 @@ class Demosaic:
     move PSNR by less than this (docs/auto.md); None: the method's own rule.
     ``max_memory``: device bytes the solver may use (None: 80 % of the device's; a larger
     admm-uv problem on an aligned grid runs in bands of lens rows).
-    ``start``: the ADMM methods' first estimate (``lfcl.demosaic.methods.STARTS``; aligned grids only), None:
-    the method's (Malvar; ``auto``: the one its rule names).
+    ``method``: ``METHOD[:START]`` (lfcl.demosaic.names.parse_method_spec), the method and, for the ADMM methods,
+    their first estimate (``lfcl.demosaic.names.STARTS``; aligned grids only), as ``admm-uv-xc:guarded``; no
+    START: the method's (Malvar; ``auto``: the one its rule names). The stage keeps them apart as ``method`` and
+    ``start`` (None: the method's); ``summary.json`` records the name as ``method`` and the start as
+    ``parameters.start``.
     ``skip_flat``: leave lenses that are flat within the noise out of the solve and give them their
     colour means (lfcl/demosaic/flat_lenses.py; admm-uv, admm-uv-xc, aligned grids); None or False: off (the
     default), True or a p threshold in (0, 1): on.
@@ -273,12 +276,12 @@ class Demosaic:
                  strength: float = DemosaicParameters.strength, device=None, callback=None,
                  max_memory: int | None = DemosaicParameters.max_memory,
                  tolerance_db: float | None = DemosaicParameters.tolerance_db,
-                 start: str | None = DemosaicParameters.start,
                  skip_flat: bool | float | None = DemosaicParameters.skip_flat,
                  auto_view: str = DemosaicParameters.auto_view, safety_net: bool = DemosaicParameters.safety_net):
         _take(self, _parameters("Demosaic", DemosaicParameters, method=method, lam=lam, iterations=iterations,
-                                strength=strength, max_memory=max_memory, tolerance_db=tolerance_db, start=start,
+                                strength=strength, max_memory=max_memory, tolerance_db=tolerance_db,
                                 skip_flat=skip_flat, auto_view=auto_view, safety_net=safety_net))
+        self.method, self.start = self.parameters.method_and_start  # METHOD[:START], apart
         self.device, self.callback = device, callback  # where it runs and who watches: not parameters
 
     def options(self) -> dict:

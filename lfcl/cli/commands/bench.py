@@ -68,8 +68,8 @@ def capture_source(func):
 @click.option("--reference-budgets", default=None, metavar="K,...|none",
               help="Budgets for the numpy reference ADMM (slow). Default: the --budgets up to 10.")
 @click.option("--methods", default="admm-uv,admm-st,admm-uvst", show_default=True,
-              help="ADMM methods, each optionally NAME:START (e.g. admm-uv-xc:linear4d); lfcl's Malvar and "
-                   "linear4d and the two peers always run.")
+              help="ADMM methods, each METHOD[:START] as lfcl process --method takes it (e.g. admm-uv-xc:linear4d); "
+                   "lfcl's Malvar and linear4d and the two peers always run.")
 @click.option("--repeats", type=int, default=1, show_default=True, help="Timed runs per point (median).")
 @click.option("--skip-flat", is_flag=True,
               help="Leave flat lenses out of the solve (admm-uv, admm-uv-xc; lfcl process --skip-flat, off by "

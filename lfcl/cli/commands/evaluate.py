@@ -24,8 +24,8 @@ def _floats(text: str, name: str) -> list[float]:
 @click.command("evaluate")
 @click.argument("capture_dir", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--methods", default="malvar,admm-uv,admm-st,admm-uvst", show_default=True,
-              help="Comma-separated methods to compare; an ADMM method may name its start, as "
-                   "admm-uv-xc:linear4d (lfcl process --start).")
+              help="Comma-separated methods to compare, each METHOD[:START] as lfcl process --method takes it "
+                   "(an ADMM method may name its start, as admm-uv-xc:linear4d).")
 @click.option("-o", "--output", "out_dir", default=None, type=click.Path(file_okay=False, path_type=Path),
               help="Where eval.json, eval.md and the figures go. Default: CAPTURE_DIR/eval.")
 @click.option("--sweep-lux", default=None, metavar="LUX,...",

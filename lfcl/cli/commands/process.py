@@ -19,6 +19,7 @@ from pathlib import Path
 
 import click
 
+from ...demosaic.names import method_spec, parse_method_spec
 from ...pipeline.parameters import (
     DEFAULT_PITCH,  # noqa: F401 (lfcl batch's)
     DEFAULT_REFOCUS,
@@ -106,7 +107,8 @@ class ProcessSettings:
     ``outputs``: the output kinds (``refocus`` added when ``--refocus`` was given);
     ``refocus``: the slopes spec (None when refocus is not among the outputs);
     ``max_memory``: bytes or None; ``tolerance_db``: the ADMM stop in dB or None (the
-    method's rule); ``start``: the ADMM methods' first estimate or None (the method's); ``recipe``: what the outputs record about a
+    method's rule); ``method`` and ``start``: ``--method METHOD[:START]`` apart, the start None where none is
+    named (the method's); ``recipe``: what the outputs record about a
     ``--recipe`` (name, path, options, from_command_line) or None. Defaults: the stages' schemas
     (lfcl/pipeline/parameters.py).
     """
@@ -143,9 +145,9 @@ class ProcessSettings:
         return Pipeline([
             Decode(self.pattern),
             Grid(pitch=self.pitch, calibration=self.calibration, white=self.white, pattern=self.pattern),
-            Demosaic(self.method, lam=self.lam, iterations=self.iterations, strength=self.strength,
-                     device=self.device, callback=callback, max_memory=self.max_memory,
-                     tolerance_db=self.tolerance_db, start=self.start, skip_flat=self.skip_flat,
+            Demosaic(method_spec(self.method, self.start), lam=self.lam, iterations=self.iterations,
+                     strength=self.strength, device=self.device, callback=callback, max_memory=self.max_memory,
+                     tolerance_db=self.tolerance_db, skip_flat=self.skip_flat,
                      safety_net=self.safety_net, auto_view=view_for_outputs(self.outputs)),  # auto judges its choice on what is written
             Outputs(list(self.outputs), refocus=self.refocus or DEFAULT_REFOCUS, fmt=self.fmt,
                     previews=self.previews, metadata=extra),
@@ -186,6 +188,7 @@ def settings_from_options(options: dict, ctx: click.Context | None = None) -> Pr
     from ...outputs.refocus import parse_slopes
 
     # --- everything a user can get wrong in the options, before any work ------------------
+    method, start = parse_method_spec(method)
     wanted = parse_outputs(outputs)
     if refocus_spec is not None and "refocus" not in wanted:
         wanted.append("refocus")
@@ -205,7 +208,7 @@ def settings_from_options(options: dict, ctx: click.Context | None = None) -> Pr
     if white is not None and not Path(white).is_file():
         raise FileNotFoundError(f"white image {str(white)!r} does not exist")
     if calibration is not None:
-        _check_method_for_calibration(method, calibration, options.get("start"))
+        _check_method_for_calibration(method, calibration, start)
     max_memory, tolerance_db = options["max_memory"], options.get("tolerance_db")
     skip_flat, flat_p = options.get("skip_flat"), options.get("flat_p")
     if flat_p is not None:
@@ -218,7 +221,7 @@ def settings_from_options(options: dict, ctx: click.Context | None = None) -> Pr
         refocus=refocus_spec, fmt=fmt, previews=bool(previews), lam=lam, iterations=iterations,
         strength=float(strength), max_memory=_field_value("max_memory", max_memory),
         device=options["device"], recipe=recipe_meta,
-        tolerance_db=None if tolerance_db is None else float(tolerance_db), start=options.get("start"),
+        tolerance_db=None if tolerance_db is None else float(tolerance_db), start=start,
         skip_flat=skip_flat, safety_net=bool(options.get("safety_net", True)))
     settings.pipeline()  # the stages check the rest (--strength, --lambda, ...), still before any work
     return settings
@@ -237,8 +240,8 @@ def _check_method_for_calibration(method: str, calibration, start: str | None = 
     words = grid_words({"grid": geo["kind"], "packing": cal.grid.packing, "features": geo["features"]})
     check_method_for_grid(method, geo["kind"], f"the {words} lens grid of {what} ({describe_grid(cal)})")
     if geo["kind"] == "resampled" and start not in (None, "malvar"):
-        raise ValueError(f"--start {start} needs an aligned square lens grid; {what} gives the {words} lens grid "
-                         f"({describe_grid(cal)}): leave --start out")
+        raise ValueError(f"--method {method}:{start} needs an aligned square lens grid; {what} gives the {words} "
+                         f"lens grid ({describe_grid(cal)}): leave :{start} out")
 
 
 def process_summary(summary: dict) -> dict:
