@@ -265,3 +265,23 @@ def test_smoothing_fills_unknown_lenses_from_their_neighbours(rng):
     ring[1:3, 1:3] = np.nan
     assert np.nanmin(ring) - 1e-3 <= smooth.disparity[hole].min() <= smooth.disparity[hole].max() <= np.nanmax(ring) + 1e-3
     assert np.abs(smooth.disparity[hole] - plain.disparity[hole]).max() > 1e-3
+
+
+@pytest.mark.parametrize("planes, lenses, radius", [(1, (1, 1), 0), (3, (5, 7), 1), (4, (9, 6), 4), (2, (3, 2), 4)])
+def test_device_window_aggregation_matches_numpy(runtime, rng, planes, lenses, radius):
+    from lfcl.depth.cost import WindowAggregate, aggregate_window_np, window_offsets
+
+    maps = rng.standard_normal((planes, *lenses)).astype(np.float32)
+    weights = rng.random(((2 * radius + 1) ** 2, *lenses)).astype(np.float32)
+    expected = aggregate_window_np(maps.astype(np.float64), window_offsets(radius), weights.astype(np.float64))
+    got = WindowAggregate(runtime, planes, lenses, radius).forward(runtime.to_device(maps),
+                                                                   runtime.to_device(weights)).get()
+    np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-5)
+    # By the definition: a lens's sum over its window, its own weights, lenses past the frame as 0.
+    p, s, t = planes - 1, lenses[0] // 2, lenses[1] - 1
+    by_hand = sum(weights[o, s, t] * maps[p, s + dy, t + dx] for o, (dy, dx) in enumerate(window_offsets(radius))
+                  if 0 <= s + dy < lenses[0] and 0 <= t + dx < lenses[1])
+    assert got[p, s, t] == pytest.approx(float(by_hand), rel=1e-5, abs=1e-5)
+    with pytest.raises(ValueError, match="weights must be float32 of shape"):
+        WindowAggregate(runtime, planes, lenses, radius).forward(runtime.to_device(maps),
+                                                                 runtime.to_device(weights[:-1]))

@@ -424,3 +424,12 @@ def test_admm_epi_in_bands_matches_the_whole_sensor(runtime, rng):
     np.testing.assert_allclose(banded.planes, whole.planes, rtol=0, atol=1e-3)
     with pytest.raises(ValueError, match="halo"):
         demosaic_grid(b, "GRBG", grid, "admm-epi", noise=noise, iterations=2, max_memory=epi_solver_bytes((U, T * V), True))
+
+
+@pytest.mark.parametrize("shape", [(3, 9, 4, 9), (2, 1, 3, 5), (2, 4, 3, 1), (1, 1, 1, 1)])
+def test_offset_table_of_zero_disparity_is_the_general_table(shape):
+    """The fall-back block (d = 0) takes a shortcut through the offset table: the same table as the general rule."""
+    from lfcl.ops.epi import _offset_table, offset_table_np
+
+    zeros = np.zeros(shape, np.float32)
+    np.testing.assert_array_equal(offset_table_np(zeros), _offset_table(zeros))

@@ -191,3 +191,48 @@ class CostVolume:
                      ("RIDGE_PPM", round(RIDGE * 1e6)), ("MIN_WEIGHT_PPM", round(MIN_WEIGHT * 1e6))),
         )
         return out
+
+
+def window_offsets(radius: int) -> list[tuple[int, int]]:
+    """The ``(dy, dx)`` of a ``(2 radius + 1)^2`` window, row by row: the order of the weights' first axis."""
+    return [(dy, dx) for dy in range(-radius, radius + 1) for dx in range(-radius, radius + 1)]
+
+
+def aggregate_window_np(maps: np.ndarray, offsets, weights: np.ndarray) -> np.ndarray:
+    """Window sums of lens maps ``[..., S, T]`` with per-offset weights ``[n, S, T]`` (those of the window's
+    centre lens), lenses outside the frame as 0: float64. The twin of :class:`WindowAggregate`."""
+    S, T = maps.shape[-2:]
+    radius = max(max(abs(dy), abs(dx)) for dy, dx in offsets)
+    pad_width = [(0, 0)] * (maps.ndim - 2) + [(radius, radius), (radius, radius)]
+    pad = np.pad(maps, pad_width)
+    out = np.zeros(maps.shape, np.float64)
+    for (dy, dx), w in zip(offsets, weights, strict=True):
+        out += w * pad[..., radius + dy:radius + dy + S, radius + dx:radius + dx + T]
+    return out
+
+
+class WindowAggregate:
+    """:func:`aggregate_window_np` on the device (lfcl/kernels/depth_aggregate.cl) for a stack of
+    ``planes`` lens maps [S, T] and the weights of :func:`window_offsets` ``(radius)``. At 500x500 lenses
+    (81 candidates, radius 4) the numpy twin took 12.4 s of admm-epi's 20 s on an H200's host (BENCHMARKS.md)."""
+
+    def __init__(self, runtime, planes: int, lenses, radius: int):
+        self.runtime = runtime
+        self.planes, (self.S, self.T), self.radius = int(planes), (int(n) for n in lenses), int(radius)
+        if self.planes < 1 or self.S < 1 or self.T < 1 or self.radius < 0:
+            raise ValueError(f"aggregation needs planes, lenses >= 1 and a radius >= 0, got {planes}, {lenses}, {radius}")
+        self.maps_shape = (self.planes, self.S, self.T)
+        self.weights_shape = ((2 * self.radius + 1) ** 2, self.S, self.T)
+
+    def forward(self, maps, weights, out=None):
+        """``[P, S, T]`` float32 device maps, ``[(2R + 1)^2, S, T]`` device weights -> ``[P, S, T]`` window sums."""
+        from ..device import grid_defines
+        from ..ops import check_device_array, output
+
+        check_device_array(maps, self.maps_shape, "maps")
+        check_device_array(weights, self.weights_shape, "weights")
+        out = output(self.runtime, out, self.maps_shape)
+        self.runtime.launch("depth_aggregate", "depth_aggregate", (self.T, self.S, self.planes), maps.data, weights.data,
+                            out.data, np.int32(self.S), np.int32(self.T), np.int32(self.planes),
+                            np.int32(self.radius), defines=grid_defines((1, 1), 0))
+        return out

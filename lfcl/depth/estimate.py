@@ -23,6 +23,9 @@
    smoothness term, so that lenses of low confidence take their neighbours' value; the returned
    ``confidence`` stays the step-3 one (0 = unknown).
 
+Steps 1 and 2 run on the device (lfcl/kernels/depth.cl, depth_aggregate.cl; only the window sums come
+back), the rest on the host; ``backend="numpy"`` runs the float64 twins of both.
+
 Units and sign: ``d`` in lenses per view step; a point seen at lens ``(s, t)`` in the centre view
 ``(uc, vc)`` is seen by view ``(u, v)`` at lens ``(s - d (u - uc), t - d (v - vc))`` (HCI's sign).
 """
@@ -36,7 +39,7 @@ import numpy as np
 
 from ..layout import channel_map, parse_pattern
 from . import _checks
-from .cost import MODELS, CostVolume, cost_volume_np
+from .cost import MODELS, CostVolume, WindowAggregate, aggregate_window_np, cost_volume_np, window_offsets
 
 DEFAULTS = {
     "dmax": 2.0,  # search range [-dmax, dmax], lenses per view step
@@ -194,29 +197,15 @@ def _window_weights(guide, radius, sigma, gain, floor):
     _, S, T = guide.shape
     nv = gain * np.maximum(guide, 0) + floor  # per colour, per lens
     # The guide averages ~2-5 samples per colour: its noise variance is about nv / 2.
-    offsets, weights = [], []
+    offsets, weights = window_offsets(radius), []
     pad = np.pad(guide, ((0, 0), (radius, radius), (radius, radius)), mode="edge")
     valid = np.pad(np.ones((S, T)), radius)
-    for dy in range(-radius, radius + 1):
-        for dx in range(-radius, radius + 1):
-            other = pad[:, radius + dy:radius + dy + S, radius + dx:radius + dx + T]
-            inside = valid[radius + dy:radius + dy + S, radius + dx:radius + dx + T]
-            z2 = ((other - guide) ** 2 / np.maximum(nv, 1e-12)).mean(axis=0)
-            offsets.append((dy, dx))
-            weights.append(inside * np.exp(-z2 / (sigma * sigma)))
+    for dy, dx in offsets:
+        other = pad[:, radius + dy:radius + dy + S, radius + dx:radius + dx + T]
+        inside = valid[radius + dy:radius + dy + S, radius + dx:radius + dx + T]
+        z2 = ((other - guide) ** 2 / np.maximum(nv, 1e-12)).mean(axis=0)
+        weights.append(inside * np.exp(-z2 / (sigma * sigma)))
     return offsets, np.stack(weights)
-
-
-def _aggregate(volume, offsets, weights):
-    """Window sums of ``volume`` [..., S, T] with per-offset weights ([n, S, T])."""
-    S, T = volume.shape[-2:]
-    radius = max(max(abs(dy), abs(dx)) for dy, dx in offsets)
-    pad_width = [(0, 0)] * (volume.ndim - 2) + [(radius, radius), (radius, radius)]
-    pad = np.pad(volume, pad_width)
-    out = np.zeros(volume.shape, np.float64)
-    for (dy, dx), w in zip(offsets, weights):
-        out += w * pad[..., radius + dy:radius + dy + S, radius + dx:radius + dx + T]
-    return out
 
 
 def _best(cost, ds, exclusion):
@@ -355,32 +344,35 @@ def estimate_disparity(mosaic, pattern, pitch, *, origin=(0, 0), noise=None, dev
     if opts["occlusion"]:
         uc, vc = U // 2, V // 2  # halves share the centre row / column
         subsets += [(0, uc, 0, V - 1), (U - 1 - uc, U - 1, 0, V - 1), (0, U - 1, 0, vc), (0, U - 1, V - 1 - vc, V - 1)]
+    guide = _guide(mosaic, pattern, (U, V), origin, S, T)
+    offsets, wwin = _window_weights(guide, opts["radius"], opts["guide_sigma"], gain, floor)
     if opts["backend"] == "numpy":
-        def volume_of(views):
-            return cost_volume_np(mosaic, pattern, (U, V), ds, origin=origin, noise=(gain, floor),
-                                  saturation=opts["saturation"], model=opts["model"], views=views)
-    else:
+        def aggregated(views):
+            """The window sums of the volume's excess and weight, and the lenses that gathered any sample."""
+            volume = cost_volume_np(mosaic, pattern, (U, V), ds, origin=origin, noise=(gain, floor),
+                                    saturation=opts["saturation"], model=opts["model"], views=views)
+            return (aggregate_window_np(volume[0], offsets, wwin), aggregate_window_np(volume[1], offsets, wwin),
+                    volume[1].max(axis=0) > 0)
+    else:  # the volume stays on the device; only its window sums come back
         from ..device import get_runtime
 
         runtime = get_runtime(device)
         op = CostVolume(runtime, mosaic.shape, pattern, (U, V), ds, origin=origin, model=opts["model"])
-        data = runtime.to_device(mosaic)
+        window = WindowAggregate(runtime, 2 * ds.size, (S, T), opts["radius"])
+        data, weights = runtime.to_device(mosaic), runtime.to_device(wwin.astype(np.float32))
 
-        def volume_of(views):
-            return op.forward(data, (gain, floor), opts["saturation"], views).get()
+        def aggregated(views):
+            volume = op.forward(data, (gain, floor), opts["saturation"], views)
+            sums = window.forward(volume.reshape(2 * ds.size, S, T), weights).get().astype(np.float64)
+            return sums[:ds.size], sums[ds.size:], volume[1].get().max(axis=0) > 0
 
-    guide = _guide(mosaic, pattern, (U, V), origin, S, T)
-    offsets, wwin = _window_weights(guide, opts["radius"], opts["guide_sigma"], gain, floor)
     best, seen, cost_seconds = None, None, 0.0
     for index, views in enumerate(subsets):  # one volume at a time: memory stays ~3 volumes
         start = time.perf_counter()
-        volume = volume_of(views)
+        agg_excess, agg_weight, gathered = aggregated(views)
         cost_seconds += time.perf_counter() - start
         if seen is None:
-            seen = volume[1].max(axis=0) > 0  # lenses that gathered any sample
-        agg_excess = _aggregate(volume[0], offsets, wwin)
-        agg_weight = _aggregate(volume[1], offsets, wwin)
-        del volume
+            seen = gathered  # lenses that gathered any sample
         cost = agg_excess / np.maximum(agg_weight, 1e-12)
         # The cost's noise: excess / weight of pure noise has a standard deviation ~ sqrt(2 / weight).
         sigma_c = np.sqrt(2.0 / np.maximum(agg_weight.max(axis=0), 1e-12))
@@ -394,7 +386,7 @@ def estimate_disparity(mosaic, pattern, pitch, *, origin=(0, 0), noise=None, dev
             best[0] = np.where(take, score, best[0])
             best[1] = np.where(take[None], cost, best[1])
             best[2] = np.where(take, sigma_c, best[2])
-    seconds["cost"] = cost_seconds
+    seconds["cost_and_window"] = cost_seconds
     _, cost, sigma_c = best
     raw_d, c_best, c_other = _best(cost, ds.astype(np.float64), opts["exclusion"])
     z = (c_other - c_best) / (sigma_c + 0.5 * np.maximum(c_best, 0.0))
@@ -409,7 +401,7 @@ def estimate_disparity(mosaic, pattern, pitch, *, origin=(0, 0), noise=None, dev
     else:
         disparity = raw_d
     seconds["total"] = time.perf_counter() - t_start
-    seconds["aggregate_select"] = seconds["total"] - seconds["noise"] - seconds["cost"]
+    seconds["select"] = seconds["total"] - seconds["noise"] - seconds["cost_and_window"]
     disparity = np.clip(disparity, -opts["dmax"], opts["dmax"])
     return DisparityMap(np.ascontiguousarray(disparity, np.float32), np.ascontiguousarray(confidence, np.float32),
                         float(opts["dmax"]), float(opts["step"]), opts, noise_meta, seconds)

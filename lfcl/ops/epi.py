@@ -198,6 +198,19 @@ def offset_table_np(d_rays: np.ndarray) -> np.ndarray:
     3, the adjoint v-block (k = source lens t - target lens t', within lens row s). Supersets of the
     offsets that carry a weight (the kernels skip zero weights); lo > hi when there are none.
     """
+    S, U, _, V = d_rays.shape
+    if not np.any(d_rays):  # d = 0 (the fall-back block): every tap is the sample's own lens
+        table = np.zeros((4, S, 2), np.int32)
+        if U == 1:
+            table[[0, 2], :, 1] = -1
+        if V == 1:
+            table[[1, 3], :, 1] = -1
+        return table
+    return _offset_table(d_rays)
+
+
+def _offset_table(d_rays: np.ndarray) -> np.ndarray:
+    """:func:`offset_table_np` for any disparities."""
     S, U, T, V = d_rays.shape
     table = np.zeros((4, S, 2), np.int32)
     table[..., 1] = -1
