@@ -43,7 +43,7 @@ from ..layout import LightFieldShape
 from ..noise.model import NoiseEstimate, estimate_noise
 from ..ops.flatlens import LensFlatness
 from ..ops.lenscopy import LensCopy
-from ..ops.malvar import Malvar
+from ..ops.malvar import Malvar, malvar_planes
 from ..ops.reduce import Reductions
 from ..solvers.admm import AdmmSolver, solver_bytes, solver_largest_buffer
 from ..solvers.params import AdmmParams
@@ -298,6 +298,10 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
         planes = linear4d(runtime, mosaic, pattern, pitch, origin, noise)
         _check_finite(planes, "linear4d", mosaic)
         return DemosaicResult(planes, method, {}, 0, time.perf_counter() - began, "direct", [], noise)
+    if method == "malvar":
+        planes = malvar_planes(runtime, mosaic, pattern, origin)
+        _check_finite(planes, "malvar", mosaic)
+        return DemosaicResult(planes, method, {}, 0, time.perf_counter() - began, "direct", [], None)
     b = runtime.to_device(mosaic)
     epi_start_replaced = None
     # admm-epi's start follows the noise (lfcl/solvers/epi.py EPI_SCHEDULE), unless lam and iterations are given
@@ -307,7 +311,7 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
 
         noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
         start, epi_start_replaced = epi_start(noise.sigma, pitch)
-    start = "malvar" if method == "malvar" else start or "malvar"
+    start = start or "malvar"
     guard = None
     if start in ("linear4d", "guarded"):
         from ..ops.linear4d import linear4d_operator
@@ -322,10 +326,6 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
             del malvar
     else:  # lens-malvar: Malvar bounded to each lens, so that no filter reads a neighbouring micro-image
         x0 = Malvar(runtime, mosaic.shape, pattern, origin, lens=pitch if start == "lens-malvar" else None).forward(b)
-    if method == "malvar":
-        planes = x0.get()
-        _check_finite(planes, "malvar", mosaic)
-        return DemosaicResult(planes, method, {}, 0, time.perf_counter() - began, "direct", [], None)
     if not math.isfinite(Reductions(runtime).abs_sum(x0)):  # on the device: no 3-plane copy to the host
         _check_finite(np.array([np.inf]), f"the {start} start", mosaic)
     defaults = ADMM_DEFAULTS[method]
