@@ -433,3 +433,18 @@ def test_offset_table_of_zero_disparity_is_the_general_table(shape):
 
     zeros = np.zeros(shape, np.float32)
     np.testing.assert_array_equal(offset_table_np(zeros), _offset_table(zeros))
+
+
+def test_epi_default_budget_caps_a_cpu_device_that_shares_the_host_memory():
+    import types
+
+    import pyopencl as cl
+
+    from lfcl.solvers.epi import EPI_CPU_BUDGET, epi_default_budget
+
+    cpu = types.SimpleNamespace(type=cl.device_type.CPU, global_mem_size=10 * 2**30)
+    gpu = types.SimpleNamespace(type=cl.device_type.GPU, global_mem_size=10 * 2**30)
+    small_cpu = types.SimpleNamespace(type=cl.device_type.CPU, global_mem_size=2**30)
+    assert epi_default_budget(cpu) == EPI_CPU_BUDGET == 2 * 2**30
+    assert epi_default_budget(gpu) == 8 * 2**30
+    assert epi_default_budget(small_cpu) == int(0.8 * 2**30)

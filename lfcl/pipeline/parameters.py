@@ -276,8 +276,9 @@ class DemosaicParameters(_Schema):
              "default: the method's own stopping rule. With --iterations: at most that many.")
     max_memory: int | None = param(
         None, kind=int, bounds=Bounds(1), cli_kind=float, cli_bounds=Bounds(0.01), cli_scale=2**30, metavar="GIB",
-        help="Device memory the solver may use, GiB; default 80% of the device's. A larger admm-uv "
-             "problem runs in bands of lens rows (exact: the (u, v) prior couples no two lenses).")
+        help="Device memory the solver may use, GiB; default 80% of the device's (admm-epi on a CPU "
+             "device: at most 2). A larger admm-uv problem runs in bands of lens rows (exact: the (u, v) "
+             "prior couples no two lenses), a larger admm-epi one in bands with a halo of lens rows.")
     skip_flat: bool | float | None = param(  # measured: off by default, so hidden
         None, cli_kind=bool, flag="--skip-flat/--solve-flat", hidden=True,
         help="Flat lenses (constant per colour within the noise: a chi-square test against the raw's "

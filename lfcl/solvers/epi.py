@@ -364,7 +364,7 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     """``admm-epi`` of lfcl.demosaic.methods.solve_aligned: estimate the disparity from the raw
     (lfcl.depth.estimate_disparity), then solve from the start ``x0`` (device arrays ``b``, ``x0``).
 
-    A sensor whose solver does not fit ``max_memory`` (default 80 % of the device's) is solved in bands of
+    A sensor whose solver does not fit ``max_memory`` (default :func:`epi_default_budget`) is solved in bands of
     lens rows, each with the halo of lens rows its prior reaches (:func:`epi_halo`), each stopped by its own
     rule; only the band's own rows are kept (docs/admm.md, "admm-epi in bands").
 
@@ -383,7 +383,7 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     prior = EpiPrior(depth.disparity, depth.confidence, lam_fb=float(lam_fb))
     U = int(pitch[0])
     S = H // U
-    budget = int(max_memory) if max_memory is not None else int(0.8 * runtime.device.global_mem_size)
+    budget = int(max_memory) if max_memory is not None else epi_default_budget(runtime.device)
     fallback = prior.has_fallback((S, W // int(pitch[1])))
     halo = epi_halo(depth.disparity, pitch)
     bands = epi_bands(S, halo, epi_lens_rows_that_fit((U, W), fallback, budget, runtime.device.max_mem_alloc_size))
@@ -413,6 +413,22 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     if len(bands) > 1:
         parameters["bands"] = {"lens_rows": [s1 - s0 for s0, s1, _, _ in bands], "halo_lens_rows": halo}
     return planes, parameters, result
+
+
+#: admm-epi's default solver memory on a CPU device, whose "device memory" is the host's: at the paper's
+#: 500x500 lenses (2-core PoCL) the whole-frame solve peaked at 5.7 GB of RSS in 127 s, three bands with
+#: their halo at 3.3 GB in 133 s (docs/admm.md, "admm-epi in bands"), as darktable tiles on a CPU
+#: within a host memory limit.
+EPI_CPU_BUDGET = 2 * 2**30
+
+
+def epi_default_budget(device) -> int:
+    """The solver memory admm-epi takes when none is given: 80 % of the device's, at most
+    :data:`EPI_CPU_BUDGET` on a CPU device."""
+    import pyopencl as cl
+
+    budget = int(0.8 * device.global_mem_size)
+    return min(budget, EPI_CPU_BUDGET) if device.type & cl.device_type.CPU else budget
 
 
 def epi_halo(disparity, pitch) -> int:
