@@ -80,6 +80,18 @@ def test_copy(runtime, ops, rng, n):
     np.testing.assert_array_equal(dx.get(), x)
 
 
+@pytest.mark.parametrize("n", SIZES)
+def test_zero(runtime, ops, rng, n):
+    x = rng.standard_normal((2, n)).astype(np.float32) + 1.0
+    dx = runtime.to_device(x)
+    assert ops.zero(dx) is dx
+    np.testing.assert_array_equal(dx.get(), np.zeros_like(x))
+    # A view with an offset: only its own floats are zeroed.
+    dx = runtime.to_device(x)
+    ops.zero(dx[1])
+    np.testing.assert_array_equal(dx.get(), np.stack([x[0], np.zeros(n, np.float32)]))
+
+
 def test_empty_and_bad_arguments(runtime, ops):
     empty = runtime.empty((0, 3))
     assert ops.axpby(1.0, empty, 1.0, empty).shape == (0, 3)

@@ -49,7 +49,7 @@ def copy_np(x: np.ndarray) -> np.ndarray:
 
 
 class VectorOps:
-    """``axpby`` and ``copy`` on float32 device arrays of one shape.
+    """``axpby``, ``zero`` and ``copy`` on float32 device arrays of one shape.
 
     Example::
 
@@ -75,6 +75,14 @@ class VectorOps:
                 np.float32(a), x.data, np.float32(b), y.data, out.data, np.uint64(x.size),
             )
         return out
+
+    def zero(self, x):
+        """x = 0 through the runtime's buffer fill: no kernel to build (pyopencl's ``Array.fill`` builds one,
+        which NVIDIA's compiler answers with a warning on stderr the first time)."""
+        check_device_array(x, x.shape, "x")
+        if x.size:
+            cl.enqueue_fill_buffer(self.runtime.queue, x.base_data, np.float32(0), x.offset, x.nbytes)
+        return x
 
     def copy(self, x, out=None):
         """out = x (a device-to-device copy; a fresh array unless ``out`` is given)."""

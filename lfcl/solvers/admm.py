@@ -389,11 +389,11 @@ class AdmmSolver:
     def start(self, x):
         """The ADMM start from ``x``: z = K x, u = 0 (in the solver's buffers)."""
         self.D.forward(x, out=self._z)
-        self._u.fill(0)
+        self.vectors.zero(self._u)
         if self._cross_channel:
             zc, uc, _, _ = self._cross_buffers
             self.DC.forward(x, out=zc)
-            uc.fill(0)
+            self.vectors.zero(uc)
 
     def finish(self, x):
         """After the last iteration: dark pixels (neither data nor prior) get the harmonic extension."""

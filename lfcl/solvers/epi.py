@@ -252,7 +252,7 @@ class EpiAdmmSolver:
         """z = K x, u = 0."""
         for (op, _), (z, u) in zip(self.blocks, self._state):
             op.forward(x, z)
-            u.fill(0)
+            self.vectors.zero(u)
 
     def solve(self, b, x0, params: AdmmParams, prior: EpiPrior, callback=None, lens_weights=None) -> AdmmResult:
         """Run ADMM on mosaic ``b`` [H, W] from ``x0`` [3, H, W] (float32 device arrays; x0 is not modified).

@@ -152,7 +152,7 @@ class ResampledAdmmSolver:
         vec, red, D = self.vectors, self.reduce, self.D
         x = x0.copy()
         D.forward(x, out=self._z)
-        self._u.fill(0)
+        self.vectors.zero(self._u)
         n_x, n_z = x.size, self._z.size
         history: list[IterationRecord] = []
         while True:
