@@ -10,12 +10,13 @@ epipolar lines"). Not shipped in the wheel.
 
 (the exact runs behind the shipped schedule: docs/admm.md, "admm-epi").
 
-``trace``: for a grid of lam = c sigma (lam_fb = f lam, rho, CG steps), starts (malvar, linear4d, guarded) and
+``trace``: for a grid of lam = c sigma (lam_fb = f lam, lam_xc = xc lam: the cross-channel block along the epipolar
+lines, rho, CG steps), starts (malvar, linear4d, guarded) and
 disparities (``estimated``: lfcl.depth.estimate_disparity's defaults; ``noocc``: the same without the half-aperture
 occlusion handling; ``truth``: the scene's own, lfcl.sim.scenes.render_disparity, confidence 1, for comparison
 only), the PSNR (centre view, mean image, against the noise-free truth; without and with the lens safety net)
 after every iteration. The noise is estimated from the raw, as ``lfcl process`` does. ``fit``: per light level
-(training sigma), the rule (c, f, start, iterations or stop at rms change <= r sigma) with the best mean gain over
+(training sigma), the rule (c, f, xc, start, iterations or stop at rms change <= r sigma) with the best mean gain over
 Malvar (centre view and mean image, net on) among rules that never lose to Malvar. ``table``: admm-epi with its
 defaults and the other methods on held-out seeds (and the real light fields), seconds, with and without the net.
 """
@@ -107,9 +108,10 @@ def run_trace(args):
             for start in args.starts:
                 x0 = start_for(start, runtime, cap, b, noise)
                 start_scores = scores(x0.get(), cap.truth)
-                for c, f, rho, cg in itertools.product(args.c, args.f, args.rho, args.cg):
+                for c, f, xc, rho, cg in itertools.product(args.c, args.f, args.xc, args.rho, args.cg):
                     began = time.perf_counter()
-                    params = AdmmParams(lam=c * noise.sigma, rho=rho, max_iter=args.iterations, cg_steps=cg)
+                    params = AdmmParams(lam=c * noise.sigma, rho=rho, max_iter=args.iterations, cg_steps=cg,
+                                        lam_xc=xc * c * noise.sigma)
                     prior = EpiPrior(depth.disparity, depth.confidence, lam_fb=f * c * noise.sigma)
                     rows = []
 
@@ -123,13 +125,13 @@ def run_trace(args):
                     solver.solve(b, x0, params, prior, callback=record)
                     best = max(rows, key=lambda r: r["psnr_center_net"])
                     print(f"{scene} s{seed} {lux:4g} lux sigma={noise.sigma:.2e} {depth_kind} {start} c={c:g} f={f:g} "
-                          f"rho={rho:g} cg={cg}: malvar {base['psnr_center']:.2f}/{base['psnr_mean']:.2f}, start "
+                          f"xc={xc:g} rho={rho:g} cg={cg}: malvar {base['psnr_center']:.2f}/{base['psnr_mean']:.2f}, start "
                           f"{start_scores['psnr_center']:.2f}/{start_scores['psnr_mean']:.2f}, best centre (net) "
                           f"{best['psnr_center_net']:.2f} at {best['iteration']} (mean {best['psnr_mean_net']:.2f}), "
                           f"last {rows[-1]['psnr_center_net']:.2f}/{rows[-1]['psnr_mean_net']:.2f} "
                           f"[{time.perf_counter() - began:.1f} s] {json.dumps(depth_meta)}", flush=True)
                     out.append({"scene": scene, "seed": seed, "lux": lux, "sigma": noise.sigma, "depth": depth_kind,
-                                "start": start, "c": c, "f": f, "rho": rho, "cg_steps": cg, "malvar": base,
+                                "start": start, "c": c, "f": f, "xc": xc, "rho": rho, "cg_steps": cg, "malvar": base,
                                 "start_scores": start_scores, "depth_meta": depth_meta, "trace": rows})
     return out
 
@@ -160,7 +162,8 @@ def rule_scores(runs: list[dict], stop: str) -> dict:
 
 
 def run_fit(args):
-    """Per light level: the best (depth, start, c, f, rho, cg, stop) rule over the traced training captures.
+    """Per light level: the best (depth, start, c, f, xc, rho, cg, stop) rule over the traced training captures
+    (traces from before ``--xc`` count as xc = 0).
 
     The score is the mean centre-view gain over Malvar with the safety net (the net keeps the mean image at
     Malvar's); a rule qualifies if it beats Malvar on the centre view (net on and off) of every capture and
@@ -176,7 +179,8 @@ def run_fit(args):
     for lux in sorted(by_lux):
         groups: dict = {}
         for r in by_lux[lux]:
-            groups.setdefault((r["depth"], r["start"], r["c"], r["f"], r["rho"], r["cg_steps"]), []).append(r)
+            key = (r["depth"], r["start"], r["c"], r["f"], r.get("xc", 0.0), r["rho"], r["cg_steps"])
+            groups.setdefault(key, []).append(r)
         n = max(len(g) for g in groups.values())
         rules = []
         for key, runs in groups.items():
@@ -186,8 +190,8 @@ def run_fit(args):
                 s = rule_scores(runs, stop)
                 ok = min(s["worst_centre_net"], s["worst_centre"]) > 0 and s["worst_mean"] >= -0.1
                 s["score"] = s["mean_centre_net"] if ok else -100 + s["mean_centre_net"]
-                rules.append({"depth": key[0], "start": key[1], "c": key[2], "f": key[3], "rho": key[4],
-                              "cg_steps": key[5], **s})
+                rules.append({"depth": key[0], "start": key[1], "c": key[2], "f": key[3], "xc": key[4],
+                              "rho": key[5], "cg_steps": key[6], **s})
         rules.sort(key=lambda x: -x["score"])
         sig = float(np.median([r["sigma"] for r in by_lux[lux]]))
         print(f"lux {lux:g} (median sigma {sig:.3e}, {n} captures): best rules")
@@ -296,6 +300,7 @@ def main():
     parser.add_argument("--lenses", type=int, default=48)
     parser.add_argument("--c", default="0.3", help="lam / sigma values (trace)")
     parser.add_argument("--f", default="1", help="lam_fb / lam values (trace)")
+    parser.add_argument("--xc", default="0", help="lam_xc / lam values (trace): the cross-channel block, 0 for none")
     parser.add_argument("--rho", default="1")
     parser.add_argument("--cg", default="5")
     parser.add_argument("--starts", default="malvar", help="trace: malvar, linear4d, guarded")
@@ -309,7 +314,7 @@ def main():
     args.scenes = args.scenes.split(",")
     args.seeds = [int(s) for s in args.seeds.split(",")]
     args.lux = [float(v) for v in args.lux.split(",")]
-    args.c, args.f, args.rho = ([float(v) for v in getattr(args, k).split(",")] for k in ("c", "f", "rho"))
+    args.c, args.f, args.xc, args.rho = ([float(v) for v in getattr(args, k).split(",")] for k in ("c", "f", "xc", "rho"))
     args.cg = [int(v) for v in args.cg.split(",")]
     args.starts, args.depth, args.methods = args.starts.split(","), args.depth.split(","), args.methods.split(",")
     if args.mode == "trace":

@@ -3,6 +3,7 @@ dot tests, the diagonal of the gram, and the EPI ADMM (lfcl/solvers/epi.py) agai
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -215,6 +216,7 @@ def test_solver_matches_the_float64_reference(runtime, rng, pattern, lam_fb):
     expected = admm_epi_reference(b, pattern, (U, V), params, x0, prior, lens_weights=weights)
     solver = EpiAdmmSolver(runtime, b.shape, pattern, (U, V))
     got = solver.solve(runtime.to_device(b), runtime.to_device(x0), params, prior, lens_weights=weights)
+    assert solver.cross is None and len(solver.blocks) == (2 if lam_fb else 1)  # lam_xc = 0: no cross block
     relative = np.linalg.norm(got.x.get() - expected.x) / np.linalg.norm(expected.x)
     assert relative <= 1e-4, relative
     assert got.iterations == expected.iterations == 8
@@ -275,8 +277,6 @@ def test_solver_refuses_what_it_cannot_do(runtime, rng):
     b, x0, _ = plane_scene_mosaic(rng, 2, 2, 9, 9)
     solver = EpiAdmmSolver(runtime, b.shape, "GRBG", (9, 9))
     prior = EpiPrior(np.zeros((2, 2), np.float32))
-    with pytest.raises(ValueError, match="lam_xc"):
-        solver.solve(runtime.to_device(b), runtime.to_device(x0), AdmmParams(lam_xc=0.1), prior)
     with pytest.raises(ValueError, match="x_update 'lens'"):
         solver.solve(runtime.to_device(b), runtime.to_device(x0), AdmmParams(x_update="lens"), prior)
     with pytest.raises(ValueError, match="lam_fb"):
@@ -321,12 +321,13 @@ def test_epi_setting_follows_the_noise_in_log_sigma():
     from lfcl.solvers.epi import EpiSetting, epi_setting
 
     rows = (EpiSetting(sigma=1e-2, lam_per_sigma=0.4, fb_per_lam=2.0, change_per_sigma=0.2, iterations=18,
-                       start="linear4d"),
+                       start="linear4d", xc_per_lam=0.8),
             EpiSetting(sigma=1e-3, lam_per_sigma=0.2, fb_per_lam=1.0, change_per_sigma=0.0, iterations=10,
                        start="malvar"))
     quarter = 1e-3 * 10 ** 0.25  # a quarter of the way from 1e-3 to 1e-2 in log sigma
     got = epi_setting(quarter, rows)
     assert got.lam_per_sigma == pytest.approx(0.25) and got.fb_per_lam == pytest.approx(1.25)
+    assert got.xc_per_lam == pytest.approx(0.2)
     assert got.change_per_sigma == pytest.approx(0.05)
     assert got.iterations == 12 and got.start == "malvar" and got.sigma == pytest.approx(quarter)
     assert epi_setting(1e-3 * 10 ** 0.75, rows).start == "linear4d"
@@ -340,8 +341,6 @@ def test_epi_setting_follows_the_noise_in_log_sigma():
 
 def test_change_rule_stops_device_and_reference_at_the_same_iteration(runtime, rng):
     """admm-epi's default stop (rms change <= change_tol): the device stops where the float64 twin does."""
-    import dataclasses
-
     from lfcl.solvers.epi import EpiAdmmSolver, EpiPrior, admm_epi_reference
     from lfcl.solvers.params import AdmmParams
 
@@ -448,3 +447,172 @@ def test_epi_default_budget_caps_a_cpu_device_that_shares_the_host_memory():
     assert epi_default_budget(cpu) == EPI_CPU_BUDGET == 2 * 2**30
     assert epi_default_budget(gpu) == 8 * 2**30
     assert epi_default_budget(small_cpu) == int(0.8 * 2**30)
+
+
+# --- the cross-channel block along the epipolar lines: lam_xc ||D_epi(d, w) C x||_1 ------------------------------
+
+
+def test_colour_differences_device_matches_the_twins(runtime, rng):
+    from lfcl.ops.crosschannel import ColourDifferences, colour_differences_adjoint_np, colour_differences_np
+
+    H, W = 7, 19  # n = 133: a short last chunk
+    x = rng.standard_normal((3, H, W)).astype(np.float32)
+    y = rng.standard_normal((2, H, W)).astype(np.float32)
+    op = ColourDifferences(runtime, x.shape)
+    # one float32 subtraction / negation per entry, as the twins in float32: equal to the bit
+    np.testing.assert_array_equal(op.forward(runtime.to_device(x)).get(), colour_differences_np(x))
+    np.testing.assert_array_equal(op.adjoint(runtime.to_device(y)).get(), colour_differences_adjoint_np(y))
+    np.testing.assert_array_equal(x[0] - x[1], colour_differences_np(x)[0])  # the twin is C as documented
+    np.testing.assert_array_equal(x[2] - x[1], colour_differences_np(x)[1])
+    base = rng.standard_normal(x.shape).astype(np.float32)
+    total = op.adjoint(runtime.to_device(y), out=runtime.to_device(base), accumulate=True).get()
+    np.testing.assert_array_equal(total, base + colour_differences_adjoint_np(y))
+    with pytest.raises(ValueError, match="accumulate"):
+        op.adjoint(runtime.to_device(y), accumulate=True)
+    with pytest.raises(ValueError, match="3 colour planes"):
+        ColourDifferences(runtime, (2, H, W))
+
+
+def test_cross_block_device_matches_its_twin_and_the_epi_differences(runtime, rng):
+    """D_epi C on the device against its twin, and the twin against D_epi of the planes (D linear:
+    D (x_R - x_G) = D x_R - D x_G)."""
+    from lfcl.solvers.epi import EpiCrossGradient, epi_cross_adjoint_np, epi_cross_gradient_np
+
+    S, T, U, V = 4, 3, 5, 4
+    x = rng.standard_normal((3, S * U, T * V))
+    z = rng.standard_normal((2, 2, S * U, T * V))
+    disparity, confidence = maps(rng, S, T, spread=1.5)
+    planes = epi_gradient_np(x, disparity, (U, V), confidence)  # [2, 3, H, W]
+    twin = epi_cross_gradient_np(x, disparity, (U, V), confidence)
+    np.testing.assert_allclose(twin, np.stack([planes[:, 0] - planes[:, 1], planes[:, 2] - planes[:, 1]], axis=1),
+                               atol=1e-12)
+    op = EpiCrossGradient(runtime, x.shape, (U, V))
+    op.set_maps(disparity, confidence)
+    assert op.gradient_shape == (2, 2, S * U, T * V)
+    x32, z32 = x.astype(np.float32), z.astype(np.float32)
+    np.testing.assert_allclose(op.forward(runtime.to_device(x32)).get(),
+                               epi_cross_gradient_np(x32.astype(np.float64), disparity, (U, V), confidence), atol=1e-5)
+    np.testing.assert_allclose(op.adjoint(runtime.to_device(z32)).get(),
+                               epi_cross_adjoint_np(z32.astype(np.float64), disparity, (U, V), confidence), atol=5e-5)
+    base = rng.standard_normal(x.shape).astype(np.float32)
+    total = op.adjoint(runtime.to_device(z32), out=runtime.to_device(base), accumulate=True).get()
+    np.testing.assert_allclose(total, base + epi_cross_adjoint_np(z32.astype(np.float64), disparity, (U, V),
+                                                                  confidence), atol=5e-5)
+
+
+def test_cross_block_and_colour_differences_pass_the_dot_test(runtime, rng):
+    from lfcl.ops.crosschannel import ColourDifferences
+    from lfcl.solvers.epi import EpiCrossGradient, epi_cross_adjoint_np, epi_cross_gradient_np
+    from lfcl.testing import dottest
+
+    S, T, U, V = 5, 4, 9, 9
+    assert dottest(ColourDifferences(runtime, (3, 7, 19)), runtime, rng=np.random.default_rng(1)) <= 1e-6
+    disparity, confidence = maps(rng, S, T, spread=3.0)
+    op = EpiCrossGradient(runtime, (3, S * U, T * V), (U, V))
+    op.set_maps(disparity, confidence)
+    assert dottest(op, runtime, rng=np.random.default_rng(2)) <= 1e-5
+    x = rng.standard_normal((3, S * U, T * V))
+    y = rng.standard_normal((2, 2, S * U, T * V))
+    lhs = np.vdot(epi_cross_gradient_np(x, disparity, (U, V), confidence), y)
+    rhs = np.vdot(x, epi_cross_adjoint_np(y, disparity, (U, V), confidence))
+    assert relative_dot_error(lhs, rhs) <= 1e-12
+
+
+def test_cross_block_gram_diagonal_is_colour_gram_times_the_epi_diagonal(runtime, rng):
+    """diag((D C)^T (D C)) = (1, 2, 1) x diag(D^T D), probed column by column, and the device's Jacobi step
+    divides by diag(A^T W A + rho K^T K) with it."""
+    from lfcl.ops.cfa import cfa_adjoint_np
+    from lfcl.solvers.epi import EpiAdmmSolver, EpiPrior, epi_cross_adjoint_np, epi_cross_gradient_np
+    from lfcl.solvers.params import AdmmParams
+
+    S, T, U, V = 3, 2, 3, 3
+    H, W = S * U, T * V
+    disparity, confidence = maps(rng, S, T, spread=1.5)
+    eye = np.eye(3 * H * W)
+    probed = np.array([epi_cross_adjoint_np(epi_cross_gradient_np(eye[j].reshape(3, H, W), disparity, (U, V),
+                                                                  confidence), disparity, (U, V), confidence).ravel()[j]
+                       for j in range(eye.shape[0])]).reshape(3, H, W)
+    epi = epi_diagonal_np(disparity, (U, V), confidence)
+    np.testing.assert_allclose(probed, np.stack([epi, 2 * epi, epi]), atol=1e-12)
+    weights = np.ones((U, V))
+    weights[0, 0] = 0.0
+    rho = 0.7
+    fallback = epi_diagonal_np(np.zeros_like(disparity), (U, V), 1 - confidence)
+    expected = cfa_adjoint_np(np.tile(weights, (S, T)), "GRBG") + rho * (epi + fallback + probed)
+    solver = EpiAdmmSolver(runtime, (H, W), "GRBG", (U, V))
+    solver.prepare(AdmmParams(lam=0.01, lam_xc=0.02, rho=rho), EpiPrior(disparity, confidence, lam_fb=0.01), weights)
+    assert [lam for _, lam in solver.blocks] == [0.01, 0.01, 0.02] and solver.blocks[2][0] is solver.cross
+    got = solver.precondition(runtime.to_device(np.ones((3, H, W), np.float32)), runtime.empty((3, H, W)), rho).get()
+    np.testing.assert_allclose(got, 1 / expected, rtol=1e-5)
+
+
+@pytest.mark.parametrize("pattern, lam_fb", [("GRBG", 0.02), ("BGGR", 0.0)])
+def test_solver_with_the_cross_block_matches_the_float64_reference(runtime, rng, pattern, lam_fb):
+    from lfcl.solvers.epi import EpiAdmmSolver, EpiPrior, admm_epi_reference
+    from lfcl.solvers.params import AdmmParams
+
+    S, T, U, V = 5, 4, 9, 9
+    b, x0, _ = plane_scene_mosaic(rng, S, T, U, V, pattern=pattern)
+    disparity, confidence = maps(rng, S, T, spread=1.0)
+    prior = EpiPrior(disparity, confidence, lam_fb=lam_fb)
+    params = AdmmParams(lam=0.01, lam_xc=0.015, rho=0.5, max_iter=8, cg_steps=4, cg_tol=0.0)
+    weights = np.ones((U, V))
+    weights[0, 0] = 0.0
+    weights[4, 4] = 0.5
+    expected = admm_epi_reference(b, pattern, (U, V), params, x0, prior, lens_weights=weights)
+    solver = EpiAdmmSolver(runtime, b.shape, pattern, (U, V))
+    got = solver.solve(runtime.to_device(b), runtime.to_device(x0), params, prior, lens_weights=weights)
+    assert len(solver.blocks) == (3 if lam_fb else 2) and solver.blocks[-1] == (solver.cross, 0.015)
+    relative = np.linalg.norm(got.x.get() - expected.x) / np.linalg.norm(expected.x)
+    assert relative <= 1e-4, relative
+    assert got.iterations == expected.iterations == 8
+    for mine, ref in zip(got.history, expected.history):
+        assert mine.objective == pytest.approx(ref.objective, rel=1e-4)
+        assert mine.primal_residual == pytest.approx(ref.primal_residual, rel=1e-3, abs=1e-6)
+        assert mine.dual_residual == pytest.approx(ref.dual_residual, rel=1e-3, abs=1e-6)
+        assert mine.rms_change == pytest.approx(ref.rms_change, rel=1e-3, abs=1e-7)
+    # the block changes the answer (it is not a no-op), and its objective counts lam_xc ||D_epi C x||_1
+    plain = admm_epi_reference(b, pattern, (U, V), dataclasses.replace(params, lam_xc=0.0), x0, prior,
+                               lens_weights=weights)
+    assert np.linalg.norm(plain.x - expected.x) > 1e-3 * np.linalg.norm(expected.x)
+
+
+def test_cross_block_leaves_no_trace_on_a_later_solve_without_it(runtime, rng):
+    """One solver run with lam_xc > 0, then without: byte-identical to a fresh solver's run without, and the
+    block's state is kept per block (a fall-back block after a cross-only run gets its own shape)."""
+    from lfcl.solvers.epi import EpiAdmmSolver, EpiPrior
+    from lfcl.solvers.params import AdmmParams
+
+    S, T, U, V = 4, 3, 9, 9
+    b, x0, _ = plane_scene_mosaic(rng, S, T, U, V)
+    disparity, confidence = maps(rng, S, T, spread=1.0)
+    params = AdmmParams(lam=0.01, rho=0.5, max_iter=4, cg_steps=3, cg_tol=0.0)
+    with_xc = dataclasses.replace(params, lam_xc=0.02)
+    b_dev, x0_dev = runtime.to_device(b), runtime.to_device(x0)
+    solver = EpiAdmmSolver(runtime, b.shape, "GRBG", (U, V))
+    solver.solve(b_dev, x0_dev, with_xc, EpiPrior(disparity, confidence))  # blocks: epi, cross
+    again = solver.solve(b_dev, x0_dev, params, EpiPrior(disparity, confidence, lam_fb=0.02))  # epi, fall-back
+    fresh = EpiAdmmSolver(runtime, b.shape, "GRBG", (U, V)).solve(b_dev, x0_dev, params,
+                                                                  EpiPrior(disparity, confidence, lam_fb=0.02))
+    assert len(solver.blocks) == 2 and solver.blocks[1][0] is solver.fallback
+    np.testing.assert_array_equal(again.x.get(), fresh.x.get())
+    assert again.history == fresh.history
+    both = solver.solve(b_dev, x0_dev, with_xc, EpiPrior(disparity, confidence, lam_fb=0.02))
+    assert len(solver.blocks) == 3 and np.all(np.isfinite(both.x.get()))
+
+
+def test_epi_params_sets_lam_xc_from_the_schedule(monkeypatch):
+    import lfcl.solvers.epi as epi
+    from lfcl.solvers.params import AdmmParams
+
+    dark, _ = epi.epi_params(AdmmParams(), 2.6e-3)  # the shipped rows: the block at 0.5-2 lux, none from 12
+    assert dark.lam_xc == pytest.approx(1.0 * dark.lam) and dark.lam > 0
+    bright, _ = epi.epi_params(AdmmParams(), 1.0e-2)
+    assert bright.lam_xc == 0.0
+    rows = tuple(dataclasses.replace(row, xc_per_lam=0.5) for row in epi.EPI_SCHEDULE)
+    monkeypatch.setattr(epi, "EPI_SCHEDULE", rows)
+    params, _ = epi.epi_params(AdmmParams(), 0.01)
+    assert params.lam_xc == pytest.approx(0.5 * params.lam) and params.lam > 0
+    params, _ = epi.epi_params(AdmmParams(lam=0.004), 0.01, lam=0.004)  # an explicit lam: the ratio to it
+    assert params.lam == 0.004 and params.lam_xc == pytest.approx(0.002)
+    assert epi.epi_solver_bytes((90, 90), True, True) > epi.epi_solver_bytes((90, 90), True)

@@ -216,6 +216,24 @@ __kernel void epi_jacobi(__global const float *r, __global float *out, __global 
     }
 }
 
+// epi_jacobi with the cross-channel block (D C)^T (D C) = C^T C (x) D^T D: its diagonal is that of
+// C^T C, (1, 2, 1) for (R, G, B), times xdiag = diag(D^T D) [H, W], per channel.
+__kernel void epi_jacobi_xc(__global const float *r, __global float *out, __global const float *kdiag,
+                            __global const float *xdiag, __global const float *weights, const float rho,
+                            const int height, const int width, const int pattern)
+{
+    const int col = get_global_id(0), row = get_global_id(1);
+    if (col >= width || row >= height) return;
+    const size_t plane = (size_t)height * width, i = (size_t)row * width + col;
+    const int own = bayer_colour(row, col, pattern);
+    const float w = weights[(row % PITCH_U) * PITCH_V + col % PITCH_V];
+    for (int c = 0; c < 3; ++c) {
+        const float prior = kdiag[i] + (c == 1 ? 2.0f : 1.0f) * xdiag[i];
+        const float diagonal = (c == own ? w : 0.0f) + rho * prior;
+        out[c * plane + i] = diagonal > 0.0f ? r[c * plane + i] / diagonal : 0.0f;
+    }
+}
+
 // partial[row] = sum over the row of w (x[colour] - b)^2 (Kahan-compensated). Global size: (H).
 __kernel void epi_misfit_rows(__global const float *x, __global const float *b, __global const float *weights,
                               __global float *partial, const int height, const int width, const int pattern)

@@ -32,6 +32,7 @@ from ..device import grid_defines
 from ..layout import dims_mask, ordered_dims
 from . import check_device_array, output
 from .gradient import LinkMask, gradient_adjoint_np, gradient_np
+from .linalg import elementwise_size
 
 # C^T C: the colour coupling of (D C)^T (D C) = C^T C (x) D^T D.
 COLOUR_GRAM = np.array([[1.0, -1.0, 0.0], [-1.0, 2.0, -1.0], [0.0, -1.0, 1.0]])
@@ -49,6 +50,42 @@ def colour_differences_adjoint_np(y: np.ndarray) -> np.ndarray:
     if y.ndim != 3 or y.shape[0] != 2:
         raise ValueError(f"y must have shape [2, H, W], got {y.shape}")
     return np.stack([y[0], -y[0] - y[1], y[1]])
+
+
+class ColourDifferences:
+    """C and C^T on the device (lfcl/kernels/colourdiff.cl): ``[3, H, W]`` <-> ``[2, H, W]``.
+
+    The twins are :func:`colour_differences_np` and :func:`colour_differences_adjoint_np`; admm-epi's
+    cross-channel block composes it with the EPI differences (lfcl/solvers/epi.py).
+    """
+
+    def __init__(self, runtime, planes_shape):
+        self.runtime = runtime
+        channels, height, width = (int(n) for n in planes_shape)
+        if channels != 3:
+            raise ValueError(f"the colour differences need 3 colour planes, got {channels}")
+        self.in_shape, self.out_shape = (3, height, width), (2, height, width)
+        self._n = height * width
+
+    def forward(self, x, out=None):
+        """out = C x."""
+        check_device_array(x, self.in_shape, "x")
+        out = output(self.runtime, out, self.out_shape)
+        if self._n:
+            self.runtime.launch("colourdiff", "colour_differences", elementwise_size(self._n), x.data, out.data,
+                                np.uint64(self._n))
+        return out
+
+    def adjoint(self, y, out=None, accumulate: bool = False):
+        """out = C^T y, or out += C^T y with ``accumulate`` (``out`` required then)."""
+        check_device_array(y, self.out_shape, "y")
+        if accumulate and out is None:
+            raise ValueError("accumulate needs an out array to add to")
+        out = output(self.runtime, out, self.in_shape)
+        if self._n:
+            self.runtime.launch("colourdiff", "colour_differences_adjoint", elementwise_size(self._n), y.data,
+                                out.data, np.uint64(self._n), np.int32(bool(accumulate)))
+        return out
 
 
 def cross_gradient_np(x: np.ndarray, pitch, dims, lens_weights=None) -> np.ndarray:

@@ -1,13 +1,16 @@
 """ADMM with the prior along the epipolar lines (``admm-epi``) on an OpenCL device, and its float64 twin.
 
     min_x 1/2 ||W^(1/2) (A x - b)||^2 + lam ||D_epi(d, w) x||_1 + lam_fb ||D_epi(0, 1 - w) x||_1
+          + lam_xc ||D_epi(d, w) C x||_1
 
 ``A`` the CFA sampling (the data term stays exact: A on the true sensor samples), ``D_epi(d, w)``
 the confidence-weighted differences along each sample's epipolar line (lfcl/ops/epi.py), and the
 fall-back term ``D_epi(0, 1 - w) = (1 - w) D_uv``: (u, v) differences where the disparity is not
-trusted (occlusions, textureless or non-Lambertian lenses), 0 where the confidence is 1.
+trusted (occlusions, textureless or non-Lambertian lenses), 0 where the confidence is 1. The optional
+cross-channel term (``params.lam_xc > 0``) takes the same EPI differences of the colour differences
+``C x = (x_R - x_G, x_B - x_G)`` (lfcl/ops/crosschannel.py): colour fringes along the epipolar lines.
 
-Scaled-form ADMM over the stacked blocks ``K = [K_epi; K_fb]``, each with its own threshold:
+Scaled-form ADMM over the stacked blocks ``K = [K_epi; K_fb; K_xc]``, each with its own threshold:
 
     x <- (A^T W A + rho K^T K)^{-1} (A^T W b + rho K^T (z - u))   Jacobi-PCG, warm-started
     z <- S_{lam_b / rho}(K_b x + u_b)                              per block
@@ -40,7 +43,8 @@ from ..device import grid_defines
 from ..layout import packed_pattern
 from ..ops import check_device_array, lens_weights_or_ones
 from ..ops.cfa import cfa_adjoint_np, cfa_sample_np
-from ..ops.epi import EpiGradient, check_maps, epi_matrix_np
+from ..ops.crosschannel import COLOUR_GRAM, ColourDifferences, colour_differences_adjoint_np, colour_differences_np
+from ..ops.epi import EpiGradient, check_maps, epi_adjoint_np, epi_diagonal_np, epi_gradient_np, epi_matrix_np
 from ..ops.linalg import VectorOps, elementwise_size
 from ..ops.reduce import Reductions
 from .cg import preconditioned_cg
@@ -83,16 +87,23 @@ class EpiSetting:
     change_per_sigma: float  # stop once rms(x_k - x_{k-1}) <= change_per_sigma * sigma (0: never)
     iterations: int  # at most
     start: str  # the first estimate (lfcl.demosaic.methods.solve_aligned's ``start``)
+    xc_per_lam: float = 0.0  # lam_xc = xc_per_lam * lam: the cross-channel block along the epipolar lines (0: none)
 
 
 #: admm-epi's defaults by noise level, fitted by research/fit_epi.py on training seeds (docs/admm.md,
-#: "admm-epi"). Between rows :func:`epi_setting` interpolates lam_per_sigma, fb_per_lam, change_per_sigma and
-#: the iterations in log sigma and takes the start of the nearer row; outside, the end row's.
+#: "admm-epi"). Between rows :func:`epi_setting` interpolates lam_per_sigma, fb_per_lam, xc_per_lam,
+#: change_per_sigma and the iterations in log sigma and takes the start of the nearer row; outside, the end row's.
+#: xc_per_lam (the cross-channel block along the lines): research/fit_epi.py trace --xc on the training seeds, 1 at
+#: 0.5-2 lux (+0.24 / +0.26 dB mean centre gain), 0 from 12 lux (within 0.03 dB, worse worst case; docs/admm.md).
 EPI_SCHEDULE = (  # the median sigma of the training captures at 0.5, 2, 12 and 50 lux
-    EpiSetting(sigma=1.25e-3, lam_per_sigma=0.2, fb_per_lam=0.3, change_per_sigma=0.1, iterations=20, start="guarded"),
-    EpiSetting(sigma=2.6e-3, lam_per_sigma=0.1, fb_per_lam=1.0, change_per_sigma=0.05, iterations=20, start="guarded"),
-    EpiSetting(sigma=1.0e-2, lam_per_sigma=0.1, fb_per_lam=1.0, change_per_sigma=0.05, iterations=20, start="malvar"),
-    EpiSetting(sigma=3.5e-2, lam_per_sigma=0.1, fb_per_lam=1.0, change_per_sigma=0.05, iterations=20, start="malvar"),
+    EpiSetting(sigma=1.25e-3, lam_per_sigma=0.2, fb_per_lam=0.3, change_per_sigma=0.1, iterations=20, start="guarded",
+               xc_per_lam=1.0),
+    EpiSetting(sigma=2.6e-3, lam_per_sigma=0.1, fb_per_lam=1.0, change_per_sigma=0.05, iterations=20, start="guarded",
+               xc_per_lam=1.0),
+    EpiSetting(sigma=1.0e-2, lam_per_sigma=0.1, fb_per_lam=1.0, change_per_sigma=0.05, iterations=20, start="malvar",
+               xc_per_lam=0.0),
+    EpiSetting(sigma=3.5e-2, lam_per_sigma=0.1, fb_per_lam=1.0, change_per_sigma=0.05, iterations=20, start="malvar",
+               xc_per_lam=0.0),
 )
 
 #: lfcl.depth.estimate_disparity's options for admm-epi (its own defaults otherwise): without the half-aperture
@@ -119,7 +130,7 @@ def epi_setting(sigma: float, schedule=None) -> EpiSetting:
                       fb_per_lam=(1 - t) * a.fb_per_lam + t * b.fb_per_lam,
                       change_per_sigma=(1 - t) * a.change_per_sigma + t * b.change_per_sigma,
                       iterations=round((1 - t) * a.iterations + t * b.iterations),
-                      start=a.start if t < 0.5 else b.start)
+                      start=a.start if t < 0.5 else b.start, xc_per_lam=(1 - t) * a.xc_per_lam + t * b.xc_per_lam)
 
 
 def epi_start(sigma: float, pitch) -> tuple[str, str | None]:
@@ -142,7 +153,8 @@ def epi_start(sigma: float, pitch) -> tuple[str, str | None]:
 def epi_params(params: AdmmParams, sigma: float, *, lam=None, iterations=None, strength: float = 1.0
                ) -> tuple[AdmmParams, float]:
     """``params`` (lfcl.demosaic.methods.admm_params's for admm-epi) with lam and the stop (change rule and most
-    iterations) of :func:`epi_setting` at ``sigma`` where they were not given explicitly, and lam_fb.
+    iterations) of :func:`epi_setting` at ``sigma`` where they were not given explicitly, lam_xc = xc_per_lam lam
+    (the cross-channel block), and lam_fb.
     An explicit ``iterations`` runs that many (no change rule), as for the other methods."""
     sigma = max(float(sigma), 1e-6)
     setting = epi_setting(sigma)
@@ -150,17 +162,16 @@ def epi_params(params: AdmmParams, sigma: float, *, lam=None, iterations=None, s
         params = dataclasses.replace(params, lam=strength * setting.lam_per_sigma * sigma)
     if iterations is None:
         params = dataclasses.replace(params, max_iter=setting.iterations, change_tol=setting.change_per_sigma * sigma)
+    params = dataclasses.replace(params, lam_xc=setting.xc_per_lam * params.lam)
     return params, setting.fb_per_lam * params.lam
 
 
 def _check_params(params: AdmmParams):
-    if params.lam_xc > 0:
-        raise ValueError("admm-epi has no cross-channel block: lam_xc must be 0")
     if params.x_update == "lens":
         raise ValueError("x_update 'lens' needs the (u, v) prior; the EPI prior couples lenses (use 'cg' or 'auto')")
 
 
-def epi_solver_bytes(sensor_shape, fallback: bool) -> int:
+def epi_solver_bytes(sensor_shape, fallback: bool, cross_channel: bool = False) -> int:
     """Device memory an EpiAdmmSolver.solve needs, with its start and mosaic (bytes)."""
     H, W = (int(n) for n in sensor_shape)
     planes = 3 * H * W
@@ -168,7 +179,50 @@ def epi_solver_bytes(sensor_shape, fallback: bool) -> int:
     # planes: the start, x, previous x, rhs, 4 CG vectors; K x scratch (2 planes); z, u per block (2 x 2 planes);
     # per block the rays (d, w per sample); the mosaic and diag(K^T K)
     floats = 8 * planes + 2 * planes + blocks * (4 * planes + 2 * H * W) + 2 * H * W
+    if cross_channel:  # z, u ([2, 2, H, W] each), the rays, C x [2, H, W] and diag(D^T D) [H, W]
+        floats += 2 * 4 * H * W + 2 * H * W + 2 * H * W + H * W
     return 4 * floats
+
+
+def epi_cross_gradient_np(x, disparity, pitch, confidence=None, matrix=None) -> np.ndarray:
+    """D_epi C x, the cross-channel block: ``[3, H, W]`` -> ``[2 (u/v block), 2 (R - G, B - G), H, W]``."""
+    return epi_gradient_np(colour_differences_np(np.asarray(x)), disparity, pitch, confidence, matrix)
+
+
+def epi_cross_adjoint_np(z, disparity, pitch, confidence=None, matrix=None) -> np.ndarray:
+    """C^T D_epi^T z: ``[2, 2, H, W]`` -> ``[3, H, W]``."""
+    return colour_differences_adjoint_np(epi_adjoint_np(z, disparity, pitch, confidence, matrix))
+
+
+class EpiCrossGradient:
+    """The cross-channel block ``D_epi(d, w) C`` on the device: the EPI differences (a 2-channel
+    :class:`~lfcl.ops.epi.EpiGradient`) of the colour differences ``C x`` (:class:`~lfcl.ops.crosschannel.
+    ColourDifferences`), ``[3, H, W]`` -> ``[2, 2, H, W]``. Twins: :func:`epi_cross_gradient_np`,
+    :func:`epi_cross_adjoint_np`. :meth:`set_maps` as EpiGradient's.
+    """
+
+    def __init__(self, runtime, planes_shape, pitch):
+        channels, height, width = (int(n) for n in planes_shape)
+        self.colour = ColourDifferences(runtime, (channels, height, width))
+        self.epi = EpiGradient(runtime, (2, height, width), pitch)
+        self.planes_shape = (3, height, width)
+        self.gradient_shape = self.epi.gradient_shape
+        self._differences = runtime.empty((2, height, width))  # C x, D^T z
+
+    def set_maps(self, disparity, confidence=None):
+        self.epi.set_maps(disparity, confidence)
+
+    def forward(self, x, out=None):
+        """D_epi C x."""
+        return self.epi.forward(self.colour.forward(x, self._differences), out)
+
+    def adjoint(self, z, out=None, accumulate: bool = False):
+        """C^T D_epi^T z; with ``accumulate`` added into ``out``."""
+        return self.colour.adjoint(self.epi.adjoint(z, self._differences), out, accumulate)
+
+    def diagonal(self, out=None, accumulate: bool = False):
+        """diag(D_epi^T D_epi) [H, W]; the block's diagonal is that of C^T C, (1, 2, 1), times it."""
+        return self.epi.diagonal(out, accumulate)
 
 
 class EpiAdmmSolver:
@@ -187,19 +241,24 @@ class EpiAdmmSolver:
         self._defines = grid_defines((self.U, self.V), 3)
         self.epi = EpiGradient(runtime, self.planes_shape, (self.U, self.V))
         self.fallback = EpiGradient(runtime, self.planes_shape, (self.U, self.V))  # d = 0, weights 1 - w
+        self.cross: EpiCrossGradient | None = None  # D_epi C, built by the first prepare with lam_xc > 0
         self.vectors = VectorOps(runtime)
         self.reduce = Reductions(runtime)
         self._rhs, self._x_prev = runtime.empty(self.planes_shape), runtime.empty(self.planes_shape)
         self._cg = [runtime.empty(self.planes_shape) for _ in range(4)]
-        self._scratch = runtime.empty(self.epi.gradient_shape)  # K_b x, z - u, dz
+        # K_b x, z - u, dz: the largest block's shape; a smaller block uses its leading part (_scratch_for)
+        self._scratch = runtime.empty(self.epi.gradient_shape)
         self._kdiag = runtime.empty((self.height, self.width))
-        self._state: list = []  # (z, u) per block
+        self._xdiag = None  # diag(D_epi^T D_epi) of the cross block, with it
+        self._state: dict = {}  # (z, u) per block operator, of its gradient shape
         n = self._scratch.size
-        self._chunks = -(-n // 16)
+        self._chunks = -(-n // 16)  # the z/u step runs this many chunks for every block (past its end: sums of 0)
         self._primal_part, self._l1_part = runtime.empty(self._chunks), runtime.empty(self._chunks)
         self._misfit_rows = runtime.empty(self.height)
         self._weights = runtime.to_device(np.ones(self.U * self.V, np.float32))
-        self.blocks: list[tuple[EpiGradient, float]] = []
+        self.blocks: list[tuple] = []  # (operator, lam) per prior block
+        self._states: list = []  # (z, u) of each of self.blocks
+        self._scratches: list = []  # the scratch of each of self.blocks
 
     def set_lens_weights(self, lens_weights=None):
         """Data-term weights [U, V] of every lens (None: ones); see AdmmSolver.set_lens_weights."""
@@ -216,41 +275,65 @@ class EpiAdmmSolver:
         if prior.has_fallback(self.lenses):
             self.fallback.set_maps(np.zeros_like(disparity), 1 - confidence)
             self.blocks.append((self.fallback, prior.lam_fb))
-        while len(self._state) < len(self.blocks):
-            shape = self.epi.gradient_shape
-            self._state.append((self.runtime.empty(shape), self.runtime.empty(shape)))
         for i, (op, _) in enumerate(self.blocks):
             op.diagonal(self._kdiag, accumulate=i > 0)
+        if params.cross_channel:  # the same lines and weights as the EPI block, on the colour differences
+            if self.cross is None:
+                self.cross = EpiCrossGradient(self.runtime, self.planes_shape, (self.U, self.V))
+                self._xdiag = self.runtime.empty((self.height, self.width))
+            self.cross.set_maps(disparity, confidence)
+            self.cross.diagonal(self._xdiag)  # times (1, 2, 1) per colour in epi_jacobi_xc
+            self.blocks.append((self.cross, params.lam_xc))
+        for op, _ in self.blocks:
+            if op not in self._state:
+                self._state[op] = (self.runtime.empty(op.gradient_shape), self.runtime.empty(op.gradient_shape))
+        self._states = [self._state[op] for op, _ in self.blocks]
+        self._scratches = [self._scratch_for(op) for op, _ in self.blocks]
+
+    def _scratch_for(self, op):
+        """The shared scratch as ``op``'s gradient shape (its leading part: a view, offset 0)."""
+        shape = tuple(op.gradient_shape)
+        if shape == tuple(self._scratch.shape):
+            return self._scratch
+        return self._scratch.reshape(-1)[:math.prod(shape)].reshape(shape)
+
+    @property
+    def _has_cross(self) -> bool:
+        return any(op is self.cross for op, _ in self.blocks)
 
     def _pixelwise(self, kernel, *args):
         self.runtime.launch("epi", kernel, (self.width, self.height), *args, defines=self._defines)
 
     def normal(self, src, out, rho):
         """out = (A^T W A + rho K^T K) src."""
-        for i, (op, _) in enumerate(self.blocks):
-            op.adjoint(op.forward(src, self._scratch), out, accumulate=i > 0)
+        for i, ((op, _), scratch) in enumerate(zip(self.blocks, self._scratches)):
+            op.adjoint(op.forward(src, scratch), out, accumulate=i > 0)
         self._pixelwise("epi_normal_finish", out.data, src.data, self._weights.data, np.float32(rho),
                         np.int32(self.height), np.int32(self.width), self._pattern)
         return out
 
     def precondition(self, r, out, rho):
         """out = r / diag(A^T W A + rho K^T K)."""
+        if self._has_cross:
+            self._pixelwise("epi_jacobi_xc", r.data, out.data, self._kdiag.data, self._xdiag.data, self._weights.data,
+                            np.float32(rho), np.int32(self.height), np.int32(self.width), self._pattern)
+            return out
         self._pixelwise("epi_jacobi", r.data, out.data, self._kdiag.data, self._weights.data, np.float32(rho),
                         np.int32(self.height), np.int32(self.width), self._pattern)
         return out
 
     def right_hand_side(self, b, out, rho):
         """out = A^T W b + rho K^T (z - u)."""
-        for i, ((op, _), (z, u)) in enumerate(zip(self.blocks, self._state)):
-            self.vectors.axpby(1.0, z, -1.0, u, self._scratch)
-            op.adjoint(self._scratch, out, accumulate=i > 0)
+        for i, ((op, _), (z, u), scratch) in enumerate(zip(self.blocks, self._states, self._scratches)):
+            self.vectors.axpby(1.0, z, -1.0, u, scratch)
+            op.adjoint(scratch, out, accumulate=i > 0)
         self._pixelwise("epi_rhs_finish", out.data, b.data, self._weights.data, np.float32(rho),
                         np.int32(self.height), np.int32(self.width), self._pattern)
         return out
 
     def start(self, x):
         """z = K x, u = 0."""
-        for (op, _), (z, u) in zip(self.blocks, self._state):
+        for (op, _), (z, u) in zip(self.blocks, self._states):
             op.forward(x, z)
             self.vectors.zero(u)
 
@@ -270,8 +353,8 @@ class EpiAdmmSolver:
 
     def iterate(self, b, x, params: AdmmParams, history: list, callback=None) -> str:
         rho, vec, red = params.rho, self.vectors, self.reduce
-        n_z = sum(z.size for z, _ in self._state[:len(self.blocks)])
-        size = elementwise_size(self._scratch.size)
+        n_z = sum(z.size for z, _ in self._states)
+        size = elementwise_size(self._scratch.size)  # every block's step over all the chunks (see __init__)
         while True:
             vec.copy(x, self._x_prev)
             self.right_hand_side(b, self._rhs, rho)
@@ -281,15 +364,15 @@ class EpiAdmmSolver:
             dual = self._cg[0]  # CG's residual buffer is free until the next x-update
             slot = 0
             red.enqueue(slot, "diff_norm2", x, self._x_prev)
-            for i, ((op, lam), (z, u)) in enumerate(zip(self.blocks, self._state)):
-                op.forward(x, self._scratch)
-                self.runtime.launch("epi", "epi_zu", size, self._scratch.data, z.data, u.data, self._primal_part.data,
-                                    self._l1_part.data, np.float32(lam / rho), np.uint64(self._scratch.size),
+            for i, ((op, lam), (z, u), scratch) in enumerate(zip(self.blocks, self._states, self._scratches)):
+                op.forward(x, scratch)
+                self.runtime.launch("epi", "epi_zu", size, scratch.data, z.data, u.data, self._primal_part.data,
+                                    self._l1_part.data, np.float32(lam / rho), np.uint64(scratch.size),
                                     np.uint64(self._chunks), defines=self._defines)
                 red.enqueue(slot + 1, "sum", self._primal_part)
                 red.enqueue(slot + 2, "sum", self._l1_part)
                 slot += 2
-                op.adjoint(self._scratch, dual, accumulate=i > 0)  # K^T (z - z_prev)
+                op.adjoint(scratch, dual, accumulate=i > 0)  # K^T (z - z_prev)
             red.enqueue(slot + 1, "norm2", dual)
             self.runtime.launch("epi", "epi_misfit_rows", (self.height,), x.data, b.data, self._weights.data,
                                 self._misfit_rows.data, np.int32(self.height), np.int32(self.width), self._pattern,
@@ -314,8 +397,8 @@ class EpiAdmmSolver:
             primal_scale = dual_scale = 0.0
             if params.abs_tol > 0 or params.rel_tol > 0:
                 kx2 = z2 = 0.0
-                for i, ((op, _), (z, u)) in enumerate(zip(self.blocks, self._state)):
-                    kx2 += red.norm2(op.forward(x, self._scratch))
+                for i, ((op, _), (z, u), scratch) in enumerate(zip(self.blocks, self._states, self._scratches)):
+                    kx2 += red.norm2(op.forward(x, scratch))
                     z2 += red.norm2(z)
                     op.adjoint(u, dual, accumulate=i > 0)
                 primal_scale = math.sqrt(max(kx2, z2))
@@ -337,7 +420,8 @@ def admm_epi_reference(b, pattern, pitch, params: AdmmParams, x0, prior: EpiPrio
     disparity, confidence = prior.maps(lenses)
     lens_w = np.ones((U, V)) if lens_weights is None else np.asarray(lens_weights, dtype=np.float64)
     w = np.tile(lens_w, lenses)
-    blocks = [epi_matrix_np(disparity, pitch, confidence)]
+    M = epi_matrix_np(disparity, pitch, confidence)
+    blocks = [M]
     lams = [params.lam]
     if prior.has_fallback(lenses):
         blocks.append(epi_matrix_np(np.zeros_like(disparity), pitch, 1 - confidence))
@@ -345,15 +429,39 @@ def admm_epi_reference(b, pattern, pitch, params: AdmmParams, x0, prior: EpiPrio
     K = scipy.sparse.vstack(blocks).tocsr()
     KT = K.T.tocsr()
     kdiag = np.asarray(K.multiply(K).sum(axis=0)).reshape(H, W)
-    # per-entry weights carry both thresholds (lam_b / rho with params.lam = 1), as the cross-channel reference does
+    # per-entry weights carry every threshold (lam_b / rho with params.lam = 1), as the cross-channel reference does
     prior_weights = np.concatenate([np.full(m.shape[0], lam) for m, lam in zip(blocks, lams)])[None, :]
+
+    def main_prior(v):  # [3, rows of K]
+        return (K @ v.reshape(3, H * W).T).T
+
+    def main_adjoint(z):
+        return (KT @ z.T).T.reshape(3, H, W)
+
+    prior, prior_adjoint = main_prior, main_adjoint
+    diagonal = cfa_adjoint_np(w, pattern, origin) + params.rho * kdiag[None]
+    if params.cross_channel:  # K_xc = D_epi(d, w) C on the colour differences: K x flat, [K_main x; K_xc x]
+        split = 3 * K.shape[0]
+
+        def stacked_prior(v):
+            return np.concatenate([main_prior(v).ravel(), epi_cross_gradient_np(v, disparity, pitch, matrix=M).ravel()])
+
+        def stacked_adjoint(z):
+            return (main_adjoint(z[:split].reshape(3, -1))
+                    + epi_cross_adjoint_np(z[split:].reshape(2, 2, H, W), disparity, pitch, matrix=M))
+
+        prior, prior_adjoint = stacked_prior, stacked_adjoint
+        prior_weights = np.concatenate([np.tile(prior_weights[0], 3), np.full(4 * H * W, params.lam_xc)])
+        # diag((D C)^T (D C)) = diag(C^T C) (1, 2, 1) per colour times diag(D^T D): the device's epi_jacobi_xc
+        diagonal = diagonal + params.rho * np.diag(COLOUR_GRAM)[:, None, None] * epi_diagonal_np(
+            disparity, pitch, matrix=M)[None]
     return admm_operators(
         b, x0, dataclasses.replace(params, lam=1.0), w,
         forward=lambda v: cfa_sample_np(v, pattern, origin),
         adjoint=lambda r: cfa_adjoint_np(r, pattern, origin),
-        prior=lambda v: (K @ v.reshape(3, H * W).T).T,
-        prior_adjoint=lambda z: (KT @ z.T).T.reshape(3, H, W),
-        diagonal=cfa_adjoint_np(w, pattern, origin) + params.rho * kdiag[None],
+        prior=prior,
+        prior_adjoint=prior_adjoint,
+        diagonal=diagonal,
         prior_weights=prior_weights,
     )
 
@@ -386,7 +494,8 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     budget = int(max_memory) if max_memory is not None else epi_default_budget(runtime.device)
     fallback = prior.has_fallback((S, W // int(pitch[1])))
     halo = epi_halo(depth.disparity, pitch)
-    bands = epi_bands(S, halo, epi_lens_rows_that_fit((U, W), fallback, budget, runtime.device.max_mem_alloc_size))
+    bands = epi_bands(S, halo, epi_lens_rows_that_fit((U, W), fallback, budget, runtime.device.max_mem_alloc_size,
+                                                      cross_channel=params.cross_channel))
     if len(bands) == 1:
         solver = EpiAdmmSolver(runtime, (H, W), pattern, pitch, origin)
         run = solver.solve(b, x0, params, prior, callback=callback, lens_weights=lens_weights)
@@ -439,10 +548,11 @@ def epi_halo(disparity, pitch) -> int:
     return math.ceil(dmax * (int(pitch[0]) - 1) / 2) + math.ceil(dmax) + 2
 
 
-def epi_lens_rows_that_fit(lens_row_shape, fallback: bool, budget: int, largest_buffer: int) -> int:
+def epi_lens_rows_that_fit(lens_row_shape, fallback: bool, budget: int, largest_buffer: int,
+                           cross_channel: bool = False) -> int:
     """The most lens rows whose EpiAdmmSolver fits ``budget`` bytes, with every buffer under ``largest_buffer``."""
     U, W = lens_row_shape
-    per_row = epi_solver_bytes((U, W), fallback)
+    per_row = epi_solver_bytes((U, W), fallback, cross_channel)
     return max(0, min(budget // per_row, largest_buffer // (4 * 6 * U * W)))
 
 
