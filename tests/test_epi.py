@@ -413,7 +413,7 @@ def test_admm_epi_in_bands_matches_the_whole_sensor(runtime, rng):
     grid = AlignedGrid((U, V))
     whole = demosaic_grid(b, "GRBG", grid, "admm-epi", noise=noise, iterations=6, safety_net=False)
     assert "bands" not in whole.parameters
-    budget = epi_solver_bytes((16 * U, T * V), True)  # 16 lens rows: 3 bands here
+    budget = epi_solver_bytes((15 * U, T * V), True)  # 15 lens rows: 6 bands, equal heights of either row parity
     banded = demosaic_grid(b, "GRBG", grid, "admm-epi", noise=noise, iterations=6, safety_net=False,
                            max_memory=budget)
     bands = banded.parameters["bands"]

@@ -579,10 +579,11 @@ def _solve_bands(runtime, b_host, x0_host, pattern, pitch, origin, params, prior
     runs, solver = [], None
     for s0, s1, h0, h1 in bands:
         rows = slice(h0 * U, h1 * U)
-        if solver is None or solver.height != (h1 - h0) * U:
+        band_origin = (origin[0] + h0 * U, origin[1])
+        # a solver serves the next band of its size and Bayer phase (an odd pitch flips the phase every lens row)
+        if solver is None or solver.height != (h1 - h0) * U or (solver.origin[0] - band_origin[0]) % 2:
             solver = None  # the previous band's buffers go before the next band's come
-            solver = EpiAdmmSolver(runtime, ((h1 - h0) * U, b_host.shape[1]), pattern, pitch,
-                                   (origin[0] + h0 * U, origin[1]))
+            solver = EpiAdmmSolver(runtime, ((h1 - h0) * U, b_host.shape[1]), pattern, pitch, band_origin)
         band_prior = dataclasses.replace(prior, disparity=prior.disparity[h0:h1],
                                          confidence=None if prior.confidence is None else prior.confidence[h0:h1])
         run = solver.solve(runtime.to_device(b_host[rows]), runtime.to_device(x0_host[:, rows]), params, band_prior,
