@@ -180,6 +180,27 @@ class Runtime:
 
         return cla.zeros(self.queue, shape, dtype)
 
+    def through_device(self, source: np.ndarray, shape, launch) -> np.ndarray:
+        """A new host float32 array of ``shape`` that ``launch(queue, source_buffer, target_buffer)`` fills from the
+        host array ``source``. On a CPU device both buffers lie over the host memory itself, no copies in or out
+        (3000x3000 Malvar on PoCL through lfcl.malvar: 216 -> ~120 ms, the copies were ~45 % of it); elsewhere
+        the source goes up and the result comes down."""
+        flags = cl.mem_flags
+        source = np.ascontiguousarray(source, dtype=np.float32)
+        out = np.empty(shape, np.float32)
+        if not self.device.type & cl.device_type.CPU:
+            source_buffer = cl.Buffer(self.context, flags.READ_ONLY | flags.COPY_HOST_PTR, hostbuf=source)
+            target = cl.Buffer(self.context, flags.WRITE_ONLY, max(out.nbytes, 1))
+            launch(self.queue, source_buffer, target)
+            cl.enqueue_copy(self.queue, out, target)  # blocking: waits for the kernel
+            return out
+        source_buffer = cl.Buffer(self.context, flags.READ_ONLY | flags.USE_HOST_PTR, hostbuf=source)
+        target = cl.Buffer(self.context, flags.WRITE_ONLY | flags.USE_HOST_PTR, hostbuf=out)
+        launch(self.queue, source_buffer, target)
+        mapped, _ = cl.enqueue_map_buffer(self.queue, target, cl.map_flags.READ, 0, out.shape, np.float32)
+        mapped.base.release(self.queue)  # the map waits for the kernel and makes its writes visible in ``out``
+        return out
+
     def to_device(self, array: np.ndarray):
         import pyopencl.array as cla
 

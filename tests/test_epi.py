@@ -199,6 +199,18 @@ def plane_scene_mosaic(rng, S, T, U, V, disparity=0.4, pattern="GRBG", noise=0.0
     return b, malvar_np(b, pattern), planes
 
 
+def assert_matches_the_reference(got, expected, iterations):
+    """The device's run against the float64 twin's: x, the iterations and every record of the history."""
+    relative = np.linalg.norm(got.x.get() - expected.x) / np.linalg.norm(expected.x)
+    assert relative <= 1e-4, relative
+    assert got.iterations == expected.iterations == iterations
+    for mine, ref in zip(got.history, expected.history):
+        assert mine.objective == pytest.approx(ref.objective, rel=1e-4)
+        assert mine.primal_residual == pytest.approx(ref.primal_residual, rel=1e-3, abs=1e-6)
+        assert mine.dual_residual == pytest.approx(ref.dual_residual, rel=1e-3, abs=1e-6)
+        assert mine.rms_change == pytest.approx(ref.rms_change, rel=1e-3, abs=1e-7)
+
+
 @pytest.mark.parametrize("pattern", ["GRBG", "BGGR"])
 @pytest.mark.parametrize("lam_fb", [0.0, 0.02])
 def test_solver_matches_the_float64_reference(runtime, rng, pattern, lam_fb):
@@ -217,14 +229,7 @@ def test_solver_matches_the_float64_reference(runtime, rng, pattern, lam_fb):
     solver = EpiAdmmSolver(runtime, b.shape, pattern, (U, V))
     got = solver.solve(runtime.to_device(b), runtime.to_device(x0), params, prior, lens_weights=weights)
     assert solver.cross is None and len(solver.blocks) == (2 if lam_fb else 1)  # lam_xc = 0: no cross block
-    relative = np.linalg.norm(got.x.get() - expected.x) / np.linalg.norm(expected.x)
-    assert relative <= 1e-4, relative
-    assert got.iterations == expected.iterations == 8
-    for mine, ref in zip(got.history, expected.history):
-        assert mine.objective == pytest.approx(ref.objective, rel=1e-4)
-        assert mine.primal_residual == pytest.approx(ref.primal_residual, rel=1e-3, abs=1e-6)
-        assert mine.dual_residual == pytest.approx(ref.dual_residual, rel=1e-3, abs=1e-6)
-        assert mine.rms_change == pytest.approx(ref.rms_change, rel=1e-3, abs=1e-7)
+    assert_matches_the_reference(got, expected, iterations=8)
 
 
 def test_reference_solves_the_problem_it_states(rng):
@@ -563,14 +568,7 @@ def test_solver_with_the_cross_block_matches_the_float64_reference(runtime, rng,
     solver = EpiAdmmSolver(runtime, b.shape, pattern, (U, V))
     got = solver.solve(runtime.to_device(b), runtime.to_device(x0), params, prior, lens_weights=weights)
     assert len(solver.blocks) == (3 if lam_fb else 2) and solver.blocks[-1] == (solver.cross, 0.015)
-    relative = np.linalg.norm(got.x.get() - expected.x) / np.linalg.norm(expected.x)
-    assert relative <= 1e-4, relative
-    assert got.iterations == expected.iterations == 8
-    for mine, ref in zip(got.history, expected.history):
-        assert mine.objective == pytest.approx(ref.objective, rel=1e-4)
-        assert mine.primal_residual == pytest.approx(ref.primal_residual, rel=1e-3, abs=1e-6)
-        assert mine.dual_residual == pytest.approx(ref.dual_residual, rel=1e-3, abs=1e-6)
-        assert mine.rms_change == pytest.approx(ref.rms_change, rel=1e-3, abs=1e-7)
+    assert_matches_the_reference(got, expected, iterations=8)
     # the block changes the answer (it is not a no-op), and its objective counts lam_xc ||D_epi C x||_1
     plain = admm_epi_reference(b, pattern, (U, V), dataclasses.replace(params, lam_xc=0.0), x0, prior,
                                lens_weights=weights)

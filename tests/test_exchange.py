@@ -52,3 +52,26 @@ def test_from_host_planes_matches_numpy_twin(runtime, S, T, U, V):
     np.testing.assert_array_equal(planes, before)  # the host planes are read, not written
     with pytest.raises(ValueError, match="planes must have shape"):
         exchange_from_host_planes(runtime, planes[:, 1:], shape)
+
+
+@pytest.mark.parametrize("device_type", ["this device", "a GPU"])
+def test_through_device_on_either_kind_of_device(runtime, device_type):
+    """Runtime.through_device: host memory itself on a CPU device, copies up and down elsewhere (a GPU is
+    played here by the same device under another type); both give the twins' answers."""
+    import copy
+    import types
+
+    import pyopencl as cl
+
+    from lfcl.ops.exchange import exchange_from_host_planes
+    from lfcl.ops.malvar import malvar_np, malvar_planes
+
+    rt = runtime
+    if device_type == "a GPU":
+        rt = copy.copy(runtime)
+        rt.device = types.SimpleNamespace(type=cl.device_type.GPU)
+    shape = LightFieldShape(3, 2, 9, 9)
+    planes = np.random.default_rng(5).random(shape.planes_shape, dtype=np.float32)
+    np.testing.assert_array_equal(exchange_from_host_planes(rt, planes, shape), planes_to_exchange(planes, shape))
+    mosaic = planes[1]
+    np.testing.assert_allclose(malvar_planes(rt, mosaic, "GRBG"), malvar_np(mosaic, "GRBG"), rtol=0, atol=1e-6)

@@ -46,7 +46,7 @@ from ..ops.lenscopy import LensCopy
 from ..ops.malvar import Malvar, malvar_planes
 from ..ops.reduce import Reductions
 from ..solvers.admm import AdmmSolver, solver_bytes, solver_largest_buffer
-from ..solvers.params import AdmmParams
+from ..solvers.params import AdmmParams, BandedResult
 from .flat_lenses import FLAT_P, SKIPPABLE, fill_flat, flat_lenses, pack_lenses
 from .names import METHODS, STARTS  # noqa: F401  (STARTS: re-exported for lfcl.pipeline.stages and lfcl.bench)
 
@@ -438,12 +438,8 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
         planes = fill_flat(packing.unpack(planes, np.empty(full_shape, np.float32), pitch), found, pitch)
     if not np.all(np.isfinite(planes)):
         raise FloatingPointError(f"{method} produced NaN/Inf values; try a smaller lambda or rho")
-    history = [dict(dataclasses.asdict(r), band=i) for i, run in enumerate(runs) for r in run.history]
-    counts = [run.iterations for run in runs]
-    reason = "every lens is flat: no iterations" if not runs else runs[0].stop_reason if len(runs) == 1 else (
-        f"{len(runs)} bands of lens rows, {min(counts)}-{max(counts)} iterations (mean over lens rows "
-        f"{np.average(counts, weights=band_rows):.1f}), each stopped by its own rule "
-        f"(last band: {runs[-1].stop_reason})")
+    banded = BandedResult(runs, band_rows)
+    reason = "every lens is flat: no iterations" if not runs else banded.stop_reason
     parameters = dataclasses.asdict(params)
     parameters["start"] = start
     if guard is not None:
@@ -452,7 +448,5 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
         parameters["flat_lenses"] = found.as_dict(packing.grid[0] if packing is not None else None)
     elif dims == "uv":
         parameters["flat_lenses"] = {"flat_lenses": 0, "why": flat_why}
-    return DemosaicResult(
-        planes, method, parameters, max((run.iterations for run in runs), default=0), time.perf_counter() - began,
-        reason, history, noise,
-    )
+    return DemosaicResult(planes, method, parameters, banded.iterations, time.perf_counter() - began, reason,
+                          banded.history_rows(), noise)

@@ -347,12 +347,13 @@ def estimate_disparity(mosaic, pattern, pitch, *, origin=(0, 0), noise=None, dev
     guide = _guide(mosaic, pattern, (U, V), origin, S, T)
     offsets, wwin = _window_weights(guide, opts["radius"], opts["guide_sigma"], gain, floor)
     if opts["backend"] == "numpy":
-        def aggregated(views):
-            """The window sums of the volume's excess and weight, and the lenses that gathered any sample."""
+        def aggregated(views, want_seen):
+            """The window sums of the volume's excess and weight, and (``want_seen``) the lenses that gathered
+            any sample."""
             volume = cost_volume_np(mosaic, pattern, (U, V), ds, origin=origin, noise=(gain, floor),
                                     saturation=opts["saturation"], model=opts["model"], views=views)
             return (aggregate_window_np(volume[0], offsets, wwin), aggregate_window_np(volume[1], offsets, wwin),
-                    volume[1].max(axis=0) > 0)
+                    volume[1].max(axis=0) > 0 if want_seen else None)
     else:  # the volume stays on the device; only its window sums come back
         from ..device import get_runtime
 
@@ -361,18 +362,18 @@ def estimate_disparity(mosaic, pattern, pitch, *, origin=(0, 0), noise=None, dev
         window = WindowAggregate(runtime, 2 * ds.size, (S, T), opts["radius"])
         data, weights = runtime.to_device(mosaic), runtime.to_device(wwin.astype(np.float32))
 
-        def aggregated(views):
+        def aggregated(views, want_seen):
             volume = op.forward(data, (gain, floor), opts["saturation"], views)
             sums = window.forward(volume.reshape(2 * ds.size, S, T), weights).get().astype(np.float64)
-            return sums[:ds.size], sums[ds.size:], volume[1].get().max(axis=0) > 0
+            return sums[:ds.size], sums[ds.size:], volume[1].get().max(axis=0) > 0 if want_seen else None
 
     best, seen, cost_seconds = None, None, 0.0
     for index, views in enumerate(subsets):  # one volume at a time: memory stays ~3 volumes
         start = time.perf_counter()
-        agg_excess, agg_weight, gathered = aggregated(views)
+        agg_excess, agg_weight, gathered = aggregated(views, want_seen=seen is None)
         cost_seconds += time.perf_counter() - start
         if seen is None:
-            seen = gathered  # lenses that gathered any sample
+            seen = gathered  # lenses that gathered any sample (the full aperture's volume)
         cost = agg_excess / np.maximum(agg_weight, 1e-12)
         # The cost's noise: excess / weight of pure noise has a standard deviation ~ sqrt(2 / weight).
         sigma_c = np.sqrt(2.0 / np.maximum(agg_weight.max(axis=0), 1e-12))

@@ -200,10 +200,12 @@ __kernel void epi_rhs_finish(__global float *out, __global const float *b, __glo
         out[c * plane + i] = rho * out[c * plane + i] + (c == own ? w * b[i] : 0.0f);
 }
 
-// out = r / diag(A^T W A + rho K^T K), kdiag = diag(K^T K) [H, W]; 0 where the diagonal is 0.
+// out = r / diag(A^T W A + rho K^T K), 0 where the diagonal is 0. kdiag = diag(K^T K) [H, W] of the blocks
+// that treat the colours alike; with `cross`, the cross-channel block (D C)^T (D C) = C^T C (x) D^T D adds
+// its diagonal: that of C^T C, (1, 2, 1) for (R, G, B), times xdiag = diag(D^T D) [H, W].
 __kernel void epi_jacobi(__global const float *r, __global float *out, __global const float *kdiag,
-                         __global const float *weights, const float rho, const int height, const int width,
-                         const int pattern)
+                         __global const float *xdiag, const int cross, __global const float *weights,
+                         const float rho, const int height, const int width, const int pattern)
 {
     const int col = get_global_id(0), row = get_global_id(1);
     if (col >= width || row >= height) return;
@@ -211,24 +213,7 @@ __kernel void epi_jacobi(__global const float *r, __global float *out, __global 
     const int own = bayer_colour(row, col, pattern);
     const float w = weights[(row % PITCH_U) * PITCH_V + col % PITCH_V];
     for (int c = 0; c < 3; ++c) {
-        const float diagonal = (c == own ? w : 0.0f) + rho * kdiag[i];
-        out[c * plane + i] = diagonal > 0.0f ? r[c * plane + i] / diagonal : 0.0f;
-    }
-}
-
-// epi_jacobi with the cross-channel block (D C)^T (D C) = C^T C (x) D^T D: its diagonal is that of
-// C^T C, (1, 2, 1) for (R, G, B), times xdiag = diag(D^T D) [H, W], per channel.
-__kernel void epi_jacobi_xc(__global const float *r, __global float *out, __global const float *kdiag,
-                            __global const float *xdiag, __global const float *weights, const float rho,
-                            const int height, const int width, const int pattern)
-{
-    const int col = get_global_id(0), row = get_global_id(1);
-    if (col >= width || row >= height) return;
-    const size_t plane = (size_t)height * width, i = (size_t)row * width + col;
-    const int own = bayer_colour(row, col, pattern);
-    const float w = weights[(row % PITCH_U) * PITCH_V + col % PITCH_V];
-    for (int c = 0; c < 3; ++c) {
-        const float prior = kdiag[i] + (c == 1 ? 2.0f : 1.0f) * xdiag[i];
+        const float prior = kdiag[i] + (cross ? (c == 1 ? 2.0f : 1.0f) * xdiag[i] : 0.0f);
         const float diagonal = (c == own ? w : 0.0f) + rho * prior;
         out[c * plane + i] = diagonal > 0.0f ? r[c * plane + i] / diagonal : 0.0f;
     }

@@ -40,32 +40,22 @@ class PlanesToExchange:
         """The light field of ``planes`` (into ``out`` if given)."""
         check_device_array(planes, self.planes_shape, "planes")
         out = output(self.runtime, out, self.exchange_shape)
-        _, height, width = self.planes_shape
-        self.runtime.launch("exchange", "planes_to_exchange", (width, height), planes.data, out.data,
-                            np.int32(height), np.int32(width),
-                            defines=grid_defines((self.shape.U, self.shape.V), 0))
+        self._launch(self.runtime.queue, planes.data, out.data)
         return out
+
+    def _launch(self, queue, planes_buffer, out_buffer):
+        _, height, width = self.planes_shape
+        kernel = self.runtime.kernel("exchange", "planes_to_exchange",
+                                     defines=grid_defines((self.shape.U, self.shape.V), 0))
+        return kernel(queue, (width, height), None, planes_buffer, out_buffer, np.int32(height), np.int32(width))
 
 
 def exchange_from_host_planes(runtime, planes: np.ndarray, shape: LightFieldShape) -> np.ndarray:
     """:func:`lfcl.layout.planes_to_exchange` of host ``planes`` through the device: on a CPU device over
-    the host arrays themselves (no copies), elsewhere up, through the kernel and down."""
-    import pyopencl as cl
-    import pyopencl.array as cla
-
+    the host arrays themselves (no copies), elsewhere up, through the kernel and down
+    (:meth:`lfcl.device.Runtime.through_device`)."""
     if tuple(planes.shape) != shape.planes_shape:
         raise ValueError(f"planes must have shape {shape.planes_shape}, got {planes.shape}")
     planes = np.ascontiguousarray(planes, dtype=np.float32)
     op = PlanesToExchange(runtime, shape)
-    if not runtime.device.type & cl.device_type.CPU:
-        return op.forward(runtime.to_device(planes)).get()
-    flags = cl.mem_flags
-    lightfield = np.empty(op.exchange_shape, np.float32)
-    source = cla.Array(runtime.queue, planes.shape, np.float32,
-                       data=cl.Buffer(runtime.context, flags.READ_ONLY | flags.USE_HOST_PTR, hostbuf=planes))
-    target = cla.Array(runtime.queue, lightfield.shape, np.float32,
-                       data=cl.Buffer(runtime.context, flags.WRITE_ONLY | flags.USE_HOST_PTR, hostbuf=lightfield))
-    op.forward(source, out=target)
-    mapped, _ = cl.enqueue_map_buffer(runtime.queue, target.data, cl.map_flags.READ, 0, lightfield.shape, np.float32)
-    mapped.base.release(runtime.queue)  # the map waits for the kernel and makes its writes visible in ``lightfield``
-    return lightfield
+    return runtime.through_device(planes, op.exchange_shape, op._launch)

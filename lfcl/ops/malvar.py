@@ -172,32 +172,12 @@ def row_bands(height: int, rows: int) -> list[tuple[int, int]]:
     return list(itertools.pairwise(edges))
 
 
-def _on_host_memory(op: Malvar, array: np.ndarray, shape, launch) -> np.ndarray:
-    """A CPU device reads and writes host memory: ``launch(queue, source, target)`` on buffers over the numpy
-    arrays themselves, no copies in or out (3000x3000 on PoCL: 216 -> ~120 ms through the public call; the
-    upload and download were ~45 % of it). Returns the new host array of ``shape`` the kernel wrote."""
-    import pyopencl as cl
-
-    runtime, flags = op.runtime, cl.mem_flags
-    out = np.empty(shape, np.float32)
-    source = cl.Buffer(runtime.context, flags.READ_ONLY | flags.USE_HOST_PTR, hostbuf=array)
-    target = cl.Buffer(runtime.context, flags.WRITE_ONLY | flags.USE_HOST_PTR, hostbuf=out)
-    launch(runtime.queue, source, target)
-    mapped, _ = cl.enqueue_map_buffer(runtime.queue, target, cl.map_flags.READ, 0, shape, np.float32)
-    mapped.base.release(runtime.queue)  # the map waits for the kernel and makes its writes visible in ``out``
-    return out
-
-
 def malvar_planes(runtime, mosaic: np.ndarray, pattern: str, origin=(0, 0)) -> np.ndarray:
     """Malvar of a host float32 ``[H, W]`` mosaic -> host ``[3, H, W]`` planes (the ``malvar`` method of
-    lfcl.demosaic.methods): on a CPU device without copies, elsewhere up, through the kernel and down."""
-    import pyopencl as cl
-
+    lfcl.demosaic.methods), through :meth:`lfcl.device.Runtime.through_device` (no copies on a CPU device)."""
     array = np.ascontiguousarray(mosaic, dtype=np.float32)
     op = Malvar(runtime, array.shape, pattern, origin)
-    if not runtime.device.type & cl.device_type.CPU:
-        return op.forward(runtime.to_device(array)).get()
-    return _on_host_memory(op, array, op.planes_shape, lambda queue, source, target: runtime.kernel(
+    return runtime.through_device(array, op.planes_shape, lambda queue, source, target: runtime.kernel(
         "malvar", "malvar")(queue, (op.width, op.height), None, *op._args(source, target)))
 
 
@@ -265,6 +245,6 @@ def malvar(mosaic, pattern: str, origin=(0, 0), device=None) -> np.ndarray:
     op = Malvar(runtime, array.shape, pattern, origin)
     # The kernel writes the (H, W, 3) image itself: no transpose on the host.
     if runtime.device.type & cl.device_type.CPU:
-        return _on_host_memory(op, array, op.image_shape,
-                               lambda queue, source, target: op.image_rows(queue, source, target, (0, op.height)))
+        return runtime.through_device(array, op.image_shape,
+                                      lambda queue, source, target: op.image_rows(queue, source, target, (0, op.height)))
     return _image_streamed(op, array)

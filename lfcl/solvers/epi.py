@@ -282,7 +282,7 @@ class EpiAdmmSolver:
                 self.cross = EpiCrossGradient(self.runtime, self.planes_shape, (self.U, self.V))
                 self._xdiag = self.runtime.empty((self.height, self.width))
             self.cross.set_maps(disparity, confidence)
-            self.cross.diagonal(self._xdiag)  # times (1, 2, 1) per colour in epi_jacobi_xc
+            self.cross.diagonal(self._xdiag)  # times (1, 2, 1) per colour in epi_jacobi
             self.blocks.append((self.cross, params.lam_xc))
         for op, _ in self.blocks:
             if op not in self._state:
@@ -314,12 +314,10 @@ class EpiAdmmSolver:
 
     def precondition(self, r, out, rho):
         """out = r / diag(A^T W A + rho K^T K)."""
-        if self._has_cross:
-            self._pixelwise("epi_jacobi_xc", r.data, out.data, self._kdiag.data, self._xdiag.data, self._weights.data,
-                            np.float32(rho), np.int32(self.height), np.int32(self.width), self._pattern)
-            return out
-        self._pixelwise("epi_jacobi", r.data, out.data, self._kdiag.data, self._weights.data, np.float32(rho),
-                        np.int32(self.height), np.int32(self.width), self._pattern)
+        cross = self._has_cross
+        self._pixelwise("epi_jacobi", r.data, out.data, self._kdiag.data, (self._xdiag if cross else self._kdiag).data,
+                        np.int32(cross), self._weights.data, np.float32(rho), np.int32(self.height),
+                        np.int32(self.width), self._pattern)
         return out
 
     def right_hand_side(self, b, out, rho):
@@ -452,7 +450,7 @@ def admm_epi_reference(b, pattern, pitch, params: AdmmParams, x0, prior: EpiPrio
 
         prior, prior_adjoint = stacked_prior, stacked_adjoint
         prior_weights = np.concatenate([np.tile(prior_weights[0], 3), np.full(4 * H * W, params.lam_xc)])
-        # diag((D C)^T (D C)) = diag(C^T C) (1, 2, 1) per colour times diag(D^T D): the device's epi_jacobi_xc
+        # diag((D C)^T (D C)) = diag(C^T C) (1, 2, 1) per colour times diag(D^T D): the device's epi_jacobi
         diagonal = diagonal + params.rho * np.diag(COLOUR_GRAM)[:, None, None] * epi_diagonal_np(
             disparity, pitch, matrix=M)[None]
     return admm_operators(
