@@ -5,6 +5,9 @@ Two steps:
     python research/fit_auto.py rows -o research/auto_rows.json      # run every candidate (minutes)
     python research/fit_auto.py rule research/auto_rows.json -o lfcl/data/auto_rule.json
 
+``rows --candidates C --update research/auto_rows.json`` reruns only the candidates C (one whose defaults
+changed) and keeps the others' gains.
+
 ``rows`` simulates every training capture (charts, deadleaves and finetexture at seeds 1 and 2; charts
 planes carrying the four training photographs of docs/auto.md at seed 1) at each light level, runs
 Malvar and every candidate through lfcl.evaluation.evaluate.run_method (as `lfcl process` runs them: the safety
@@ -82,6 +85,8 @@ def main(argv=None):
     rows_parser.add_argument("--lux", default=LUX)
     rows_parser.add_argument("--candidates", default=",".join(CANDIDATES))
     rows_parser.add_argument("--shared", type=Path, default=Path("../shared"))
+    rows_parser.add_argument("--update", type=Path, metavar="ROWS",
+                             help="rows to keep, with only --candidates rerun (their gains replaced): the output")
     rule_parser = sub.add_parser("rule")
     rule_parser.add_argument("rows", type=Path)
     rule_parser.add_argument("-o", "--output", type=Path, required=True)
@@ -90,6 +95,11 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if args.step == "rows":
         rows = make_rows(args)
+        if args.update:  # the other candidates' gains as they were
+            fresh = {(r["capture"], r["lux"]): r for r in rows}
+            rows = json.loads(args.update.read_text())["rows"]
+            for row in rows:
+                row["gains"].update(fresh[(row["capture"], row["lux"])]["gains"])
         args.output.write_text(json.dumps({"args": {k: str(v) for k, v in vars(args).items()}, "rows": rows},
                                           indent=1))
         return

@@ -15,7 +15,7 @@ lines, rho, CG steps), starts (malvar, linear4d, guarded) and
 disparities (``estimated``: lfcl.depth.estimate_disparity's defaults; ``noocc``: the same without the half-aperture
 occlusion handling; ``truth``: the scene's own, lfcl.sim.scenes.render_disparity, confidence 1, for comparison
 only), the PSNR (centre view, mean image, against the noise-free truth; without and with the lens safety net)
-after every iteration. The noise is estimated from the raw, as ``lfcl process`` does. ``fit``: per light level
+after every iteration. The noise is the capture's DNG noise profile, as ``lfcl process`` reads it. ``fit``: per light level
 (training sigma), the rule (c, f, xc, start, iterations or stop at rms change <= r sigma) with the best mean gain over
 Malvar (centre view and mean image, net on) among rules that never lose to Malvar. ``table``: admm-epi with its
 defaults and the other methods on held-out seeds (and the real light fields), seconds, with and without the net.
@@ -38,7 +38,7 @@ from lfcl.evaluation.evaluate import simulated_capture
 from lfcl.evaluation.metrics import lightfield_scores
 from lfcl.grid.model import AlignedGrid
 from lfcl.layout import LightFieldShape, planes_to_exchange
-from lfcl.noise.model import estimate_noise
+from lfcl.noise.model import from_noise_profile
 from lfcl.ops.malvar import Malvar
 from lfcl.solvers.epi import EPI_SCHEDULE, EpiAdmmSolver, EpiPrior
 from lfcl.solvers.params import AdmmParams
@@ -51,6 +51,12 @@ def capture(scene, seed, lux, lenses):
     if scene in REAL:
         return simulated_capture(lenses, lux, seed, lightfield=REAL[scene])
     return simulated_capture(lenses, lux, seed, scene)
+
+
+def noise_of(cap):
+    """The noise model ``lfcl process`` uses for this capture: its DNG noise profile (a simulated raw carries
+    one, as most camera DNGs do)."""
+    return from_noise_profile(cap.noise_profile, cap.mosaic)
 
 
 def scores(planes, truth) -> dict:
@@ -99,7 +105,7 @@ def run_trace(args):
     out = []
     for scene, seed, lux in itertools.product(args.scenes, args.seeds, args.lux):
         cap = capture(scene, seed, lux, args.lenses)
-        noise = estimate_noise(cap.mosaic, cap.pattern, cap.pitch)
+        noise = noise_of(cap)
         base = scores(demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), "malvar").planes, cap.truth)
         b = runtime.to_device(cap.mosaic)
         solver = EpiAdmmSolver(runtime, cap.mosaic.shape, cap.pattern, cap.pitch)
@@ -208,10 +214,12 @@ def run_table(args):
         ([(name, args.seeds[0]) for name in REAL] if args.real else [])
     for (scene, seed), lux in itertools.product(scenes, args.lux):
         cap = capture(scene, seed, lux, args.lenses)
+        noise = noise_of(cap)
         for method in args.methods:
             for net in (False, True) if method != "malvar" else (False,):
                 began = time.perf_counter()
-                result = demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), method, safety_net=net)
+                result = demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), method, safety_net=net,
+                                       noise=None if method == "malvar" else noise)
                 seconds = time.perf_counter() - began
                 row = {"scene": scene, "seed": seed, "lux": lux, "method": method, "net": net, "seconds": seconds,
                        "iterations": result.iterations, **scores(result.planes, cap.truth)}
@@ -255,7 +263,7 @@ def run_profile(args):
 
     runtime = get_runtime()
     cap = capture(args.scenes[0], args.seeds[0], args.lux[0], args.lenses)
-    noise = estimate_noise(cap.mosaic, cap.pattern, cap.pitch)
+    noise = noise_of(cap)
     setting = epi_setting(noise.sigma)
     b = runtime.to_device(cap.mosaic)
     x0 = start_for("malvar", runtime, cap, b, noise)

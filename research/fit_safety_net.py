@@ -28,7 +28,7 @@ from lfcl.layout import LightFieldShape, planes_to_exchange
 from lfcl.noise.model import from_noise_profile
 from lfcl.ops.lensguard import guard_lens_means_np
 
-KS = (2.0, 3.0, 4.0, 6.0, 8.0, 12.0, math.inf)
+KS = (2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 32.0, math.inf)
 #: The rule: the best worst case (lower of the centre and mean gains over Malvar, every capture, level and
 #: method); among the k within TIE_DB of it, the one with the larger median mean-image gain.
 TIE_DB = 0.05

@@ -148,22 +148,30 @@ def test_bench_matrix_rows_and_the_worst_cell_first(tmp_path):
                       "admm-uvst,admm-uv", "--lenses", "8", "--shared", str(tmp_path / "none"), "--json"])
     assert result.exit_code == 0, result.output
     rows = json.loads(result.stdout)
-    assert [(r["capture"], r["method"]) for r in rows] == [("charts", "admm-uvst"), ("charts", "admm-uv"),
-                                                           ("finetexture", "admm-uvst"), ("finetexture", "admm-uv")]
+    assert [(r["capture"], r["noise"], r["method"]) for r in rows] == [
+        (scene, noise, method) for scene in ("charts", "finetexture") for noise in ("profile", "raw")
+        for method in ("admm-uvst", "admm-uv")]
     for row in rows:
         assert row["lux"] == 12 and row["net"] is not None  # the safety net ran and said on how many lenses
+    import dataclasses
+
     from lfcl.evaluation.evaluate import run_method, simulated_capture
 
     capture = simulated_capture(8, 12, seed=7, scene="charts")  # the matrix's held-out seed
-    malvar, uvst = run_method(capture, "malvar"), run_method(capture, "admm-uvst")
-    assert rows[0]["centre_gain"] == pytest.approx(uvst["psnr_center"] - malvar["psnr_center"], abs=1e-9)
-    assert rows[0]["mean_gain"] == pytest.approx(uvst["psnr_mean"] - malvar["psnr_mean"], abs=1e-9)
+    malvar = run_method(capture, "malvar")
+    for row, source in zip(rows[:4:2], (capture, dataclasses.replace(capture, noise_profile=None))):
+        uvst = run_method(source, "admm-uvst")  # with the DNG's noise profile, then without it
+        assert row["centre_gain"] == pytest.approx(uvst["psnr_center"] - malvar["psnr_center"], abs=1e-9)
+        assert row["mean_gain"] == pytest.approx(uvst["psnr_mean"] - malvar["psnr_mean"], abs=1e-9)
+    assert rows[0]["centre_gain"] != rows[2]["centre_gain"]  # the two noise models differ
     from lfcl.bench.matrix import format_rows, worst
 
     table = format_rows(rows).splitlines()
     first = min(rows, key=worst)
-    assert table[2].startswith(f"| {first['capture']} | 12 | {first['method']} |")
-    assert table[-1].startswith(f"worst cell: {first['capture']} at 12 lux")
+    assert table[2].startswith(f"| {first['capture']} | 12 | {first['noise']} | {first['method']} |")
+    assert table[-1].startswith(f"worst cell: {first['capture']} at 12 lux, noise from the {first['noise']}")
+    bad = _invoke(["bench", "matrix", "--scenes", "charts", "--lux", "12", "--lenses", "8", "--noise", "guess"])
+    assert bad.exit_code != 0 and "noise sources must be among profile, raw" in bad.output
 
 
 def test_bench_matrix_finds_the_real_light_fields_it_is_given(tmp_path):

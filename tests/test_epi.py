@@ -603,10 +603,14 @@ def test_epi_params_sets_lam_xc_from_the_schedule(monkeypatch):
     import lfcl.solvers.epi as epi
     from lfcl.solvers.params import AdmmParams
 
-    dark, _ = epi.epi_params(AdmmParams(), 2.6e-3)  # the shipped rows: the block at 0.5-2 lux, none from 12
-    assert dark.lam_xc == pytest.approx(1.0 * dark.lam) and dark.lam > 0
-    bright, _ = epi.epi_params(AdmmParams(), 1.0e-2)
-    assert bright.lam_xc == 0.0
+    for sigma in (1.0e-3, 2.6e-3, 1.0e-2):  # the shipped rows: the block at every level, lam_xc = lam
+        shipped, _ = epi.epi_params(AdmmParams(), sigma)
+        assert shipped.lam_xc == pytest.approx(1.0 * shipped.lam) and shipped.lam > 0
+    rows = tuple(dataclasses.replace(row, xc_per_lam=0.0 if i % 2 else 1.0) for i, row in enumerate(epi.EPI_SCHEDULE))
+    monkeypatch.setattr(epi, "EPI_SCHEDULE", rows)
+    between = math.sqrt(rows[0].sigma * rows[1].sigma)  # halfway in log sigma: half the block
+    params, _ = epi.epi_params(AdmmParams(), between)
+    assert params.lam_xc == pytest.approx(0.5 * params.lam)
     rows = tuple(dataclasses.replace(row, xc_per_lam=0.5) for row in epi.EPI_SCHEDULE)
     monkeypatch.setattr(epi, "EPI_SCHEDULE", rows)
     params, _ = epi.epi_params(AdmmParams(), 0.01)

@@ -63,6 +63,19 @@ def test_malvar_needs_no_net_and_auto_records_it_once(rng):
     assert "safety_net" not in demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "malvar").parameters
 
 
+def test_admm_epi_keeps_its_own_lens_means_and_says_so(finetexture):
+    from lfcl.demosaic.safety_net import NET_K_BY_METHOD, net_k
+
+    assert net_k("admm-epi") == NET_K_BY_METHOD["admm-epi"] == float("inf") and net_k("admm-uv") == NET_K
+    capture = finetexture[12]
+    default = demosaic_grid(capture.mosaic, capture.pattern, AlignedGrid(capture.pitch), "admm-epi", iterations=2)
+    off = demosaic_grid(capture.mosaic, capture.pattern, AlignedGrid(capture.pitch), "admm-epi", iterations=2,
+                        safety_net=False)
+    np.testing.assert_array_equal(default.planes, off.planes)
+    report = default.parameters["safety_net"]
+    assert report["lenses"] == 0 and report["why"].startswith("not applied: admm-epi's lens means are its own")
+
+
 def test_without_a_noise_model_the_net_says_it_did_not_act():
     one_lens = np.full((9, 9), 0.3, np.float32)  # too small to estimate the noise from
     result = demosaic_grid(one_lens, "GRBG", AlignedGrid((9, 9)), "admm-uv", lam=0.01, iterations=2)

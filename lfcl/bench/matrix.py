@@ -6,6 +6,9 @@ run Malvar and each method through the public entry point (:func:`lfcl.evaluatio
 same call `lfcl process` makes) and print the PSNR of the centre view and of the mean image minus
 Malvar's, the worst cell first. Not a timed test: a benchmark to read (BENCHMARKS.md, docs/auto.md).
 
+Each capture runs with each of ``noise``: ``profile`` (the noise model its DNG carries, as most camera DNGs do)
+and ``raw`` (the profile dropped: the noise estimated from the raw, as for a LibRaw raw or a DNG without one).
+
 Example::
 
     lfcl bench matrix --lenses 48 --lux 0.5,12 --methods admm-uv,auto
@@ -24,6 +27,8 @@ REAL_LIGHTFIELDS = {
 LUX = (0.5, 1, 2, 4, 12, 50)
 #: Seeds no default or rule of lfcl was fitted on (the fits use seeds 1 and 2, docs/admm.md).
 HELD_OUT_SEED = 7
+#: Where the methods' noise model comes from (module docstring).
+NOISE_SOURCES = ("profile", "raw")
 
 
 def real_lightfields(shared) -> dict[str, str]:
@@ -46,18 +51,24 @@ def captures(scenes, lightfields: dict[str, str], lenses: int, seed: int):
 
 
 def run(scenes, lightfields: dict[str, str], lux_levels, methods, *, lenses: int = 48, seed: int = HELD_OUT_SEED,
-        device=None, progress=None) -> list[dict]:
-    """One row per (capture, lux, method): PSNR (centre, mean) and its gain over Malvar, seconds."""
+        noise_sources=NOISE_SOURCES, device=None, progress=None) -> list[dict]:
+    """One row per (capture, lux, noise source, method): PSNR (centre, mean) and its gain over Malvar, seconds."""
+    import dataclasses
+
     from ..evaluation.evaluate import run_method, simulated_capture
 
+    unknown = sorted(set(noise_sources) - set(NOISE_SOURCES))
+    if unknown or not noise_sources:
+        raise ValueError(f"noise sources must be among {', '.join(NOISE_SOURCES)}, got {', '.join(noise_sources)}")
     rows = []
     for label, source in captures(scenes, lightfields, lenses, seed):
         for lux in lux_levels:
-            capture = simulated_capture(lenses, lux, **source)
-            malvar = run_method(capture, "malvar", device=device)
-            for method in methods:
+            profiled = simulated_capture(lenses, lux, **source)
+            malvar = run_method(profiled, "malvar", device=device)
+            for noise, method in ((n, m) for n in noise_sources for m in methods):
+                capture = profiled if noise == "profile" else dataclasses.replace(profiled, noise_profile=None)
                 result = run_method(capture, method, device=device)
-                row = {"capture": label, "lux": lux, "method": method,
+                row = {"capture": label, "lux": lux, "noise": noise, "method": method,
                        "centre": result["psnr_center"], "mean": result["psnr_mean"],
                        "centre_gain": result["psnr_center"] - malvar["psnr_center"],
                        "mean_gain": result["psnr_mean"] - malvar["psnr_mean"],
@@ -75,16 +86,18 @@ def worst(row: dict) -> float:
 
 def format_rows(rows: list[dict]) -> str:
     """The rows as a markdown table, the worst cell (lower of the two gains) first."""
-    lines = ["| capture | lux | method | centre - Malvar dB | mean - Malvar dB | centre dB | mean dB | s | net lenses |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| capture | lux | noise | method | centre - Malvar dB | mean - Malvar dB | centre dB | mean dB | s | "
+             "net lenses |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(rows, key=worst):
         net = "-" if r["net"] is None else str(r["net"])
-        lines.append(f"| {r['capture']} | {r['lux']:g} | {r['method']} | {r['centre_gain']:+.2f} | {r['mean_gain']:+.2f} "
+        lines.append(f"| {r['capture']} | {r['lux']:g} | {r['noise']} | {r['method']} | {r['centre_gain']:+.2f} | "
+                     f"{r['mean_gain']:+.2f} "
                      f"| {r['centre']:.2f} | {r['mean']:.2f} | {r['seconds']:.2f} | {net} |")
     if rows:
         low = min(rows, key=worst)
         lines.append("")
-        lines.append(f"worst cell: {low['capture']} at {low['lux']:g} lux, {low['method']}: {worst(low):+.2f} dB "
+        lines.append(f"worst cell: {low['capture']} at {low['lux']:g} lux, noise from the {low['noise']}, "
+                     f"{low['method']}: {worst(low):+.2f} dB "
                      f"({'within' if worst(low) >= -0.1 else 'outside'} Malvar - 0.1 dB)")
     return "\n".join(lines)
 

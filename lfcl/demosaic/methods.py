@@ -234,8 +234,14 @@ def _noise_model_or_why(noise, raw_mosaic, pattern, pitch, origin, asked) -> tup
 
 def with_safety_net(result: DemosaicResult, mosaic, pattern, pitch, origin, lens_response, device) -> DemosaicResult:
     """``result`` after the safety net (lfcl/demosaic/safety_net.py), on the mosaic the method saw."""
-    from .safety_net import apply_safety_net
+    from .safety_net import apply_safety_net, net_k
 
+    k = net_k(result.method)
+    if math.isinf(k):
+        report = {"k": k, "lenses": 0, "lenses_from_malvar": 0,
+                  "why": f"not applied: {result.method}'s lens means are its own (fitted per method on the training "
+                         "captures, lfcl/demosaic/safety_net.py)"}
+        return dataclasses.replace(result, parameters={**result.parameters, "safety_net": report})
     began = time.perf_counter()
     mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
     noise, why = _noise_model_or_why(result.noise, mosaic, pattern, pitch, origin, asked=None)
@@ -244,7 +250,7 @@ def with_safety_net(result: DemosaicResult, mosaic, pattern, pitch, origin, lens
         return dataclasses.replace(result, parameters={**result.parameters, "safety_net": report})
     if lens_response is not None:
         mosaic, _ = flat_field(mosaic, lens_response)
-    planes, report = apply_safety_net(get_runtime(device), result.planes, mosaic, pattern, pitch, origin, noise)
+    planes, report = apply_safety_net(get_runtime(device), result.planes, mosaic, pattern, pitch, origin, noise, k)
     _check_finite(planes, "the safety net", mosaic)
     return dataclasses.replace(result, planes=planes, parameters={**result.parameters, "safety_net": report},
                                seconds=result.seconds + time.perf_counter() - began, noise=noise)

@@ -32,6 +32,17 @@ from ..ops.malvar import Malvar
 #: (charts, deadleaves, finetexture at seeds 1 and 2, four training photographs): the best worst case over
 #: admm-uv, admm-uvst and admm-uv-xc, -0.02 dB (k = 3: -0.25, no net: -0.79; docs/auto.md).
 NET_K = 8.0
+#: Methods with their own threshold, fitted the same way (``research/fit_safety_net.py --methods M``); inf: the net
+#: does not run. admm-epi averages each colour along the epipolar lines over ~81 samples of many lenses, so its lens
+#: means are better than Malvar's where they agree within the noise: on the training captures every finite k
+#: replaced them and cost the median mean image 1.6 dB and the median centre view 0.5 dB, for no better worst case
+#: (+0.00 dB at k = 3-32, +0.03 without the net; docs/auto.md).
+NET_K_BY_METHOD = {"admm-epi": float("inf")}
+
+
+def net_k(method: str) -> float:
+    """The safety net's threshold for ``method`` (inf: the net does not run for it)."""
+    return NET_K_BY_METHOD.get(method, NET_K)
 
 
 def apply_safety_net(runtime, planes: np.ndarray, mosaic: np.ndarray, pattern: str, pitch, origin,

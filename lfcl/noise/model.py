@@ -30,6 +30,7 @@ class NoiseEstimate:
     floor: float  # variance at zero signal (read noise, dark current)
     sigma: float  # rms noise per pixel over the mosaic
     source: str  # "raw" (estimated) or "dng-noise-profile"
+    method: str = ""  # of a "raw" estimate: "plane fit" (inside the micro-images) or "epipolar pairs"
 
     def sigma_at(self, level: float) -> float:
         return math.sqrt(max(self.gain * level + self.floor, 0.0))
@@ -40,7 +41,9 @@ class NoiseEstimate:
 # variances and rescale it by the same quantile of the pure-noise distribution
 # (sigma^2 chi^2_dof / dof), which is unbiased when at least that share of the lenses
 # in the bin is flat.
-QUANTILE = 0.2
+QUANTILE = 0.02  # fitted on training captures: research/fit_noise.py (docs/noise.md)
+#: Lenses with same-point pairs (lfcl.noise.epipolar) the pair estimate needs.
+MIN_PAIR_LENSES = 64
 
 
 def _plane_residual_variances(block: np.ndarray, mask: np.ndarray):
@@ -59,8 +62,15 @@ def _plane_residual_variances(block: np.ndarray, mask: np.ndarray):
     return samples.mean(axis=1), (residual**2).sum(axis=1) / dof * to_sigma2
 
 
-def estimate_noise(mosaic: np.ndarray, pattern: str, pitch, origin=(0, 0), bins: int = 16) -> NoiseEstimate:
-    """Poisson-Gaussian noise model of a normalised lenslet mosaic [H, W]."""
+def estimate_noise(mosaic: np.ndarray, pattern: str, pitch, origin=(0, 0), bins: int = 16,
+                   light_field: bool = True, device=None) -> NoiseEstimate:
+    """Poisson-Gaussian noise model of a normalised lenslet mosaic [H, W].
+
+    Two estimates, each of which texture can only inflate: the plane fit inside each micro-image (module
+    docstring) and, with ``light_field`` and at least :data:`MIN_PAIR_LENSES` lenses that have them, the
+    same-point sample pairs along the epipolar lines (:mod:`lfcl.noise.epipolar`, its disparity on
+    ``device``); the one with the lower sigma is returned (``method`` says which).
+    """
     U, V = pitch
     H, W = mosaic.shape
     S, T = H // U, W // V
@@ -98,7 +108,18 @@ def estimate_noise(mosaic: np.ndarray, pattern: str, pitch, origin=(0, 0), bins:
     means, variances = means[keep], variances[keep]
     gain, floor = fit_noise_model(means, variances, bins)
     level = float(np.mean(mosaic))
-    return NoiseEstimate(gain, floor, math.sqrt(max(gain * level + floor, 0.0)), "raw")
+    plane = NoiseEstimate(gain, floor, math.sqrt(max(gain * level + floor, 0.0)), "raw", "plane fit")
+    if not light_field:
+        return plane
+    from .epipolar import tile_pair_variances
+
+    levels, pair_vars, pairs = tile_pair_variances(np.asarray(mosaic, np.float32), pattern, (U, V), origin, plane,
+                                                   device)
+    if levels.size < MIN_PAIR_LENSES:
+        return plane
+    gain, floor = fit_noise_model(levels, pair_vars * pairs / scipy.special.chdtri(pairs, 1 - QUANTILE), bins)
+    pair = NoiseEstimate(gain, floor, math.sqrt(max(gain * level + floor, 0.0)), "raw", "epipolar pairs")
+    return pair if pair.sigma < plane.sigma else plane
 
 
 def fit_noise_model(means: np.ndarray, variances: np.ndarray, bins: int) -> tuple[float, float]:

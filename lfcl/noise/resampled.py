@@ -60,4 +60,4 @@ def estimate_grid_noise(mosaic: np.ndarray, sampling, bins: int = 16, min_respon
                          f"of response >= {min_response}) to estimate the noise")
     gain, floor = fit_noise_model(means, variances, bins)
     level = float(np.mean(mosaic.ravel()[sampling.measured_pixels()]))
-    return NoiseEstimate(gain, floor, math.sqrt(max(gain * level + floor, 0.0)), "raw")
+    return NoiseEstimate(gain, floor, math.sqrt(max(gain * level + floor, 0.0)), "raw", "plane fit")

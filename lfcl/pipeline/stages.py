@@ -23,6 +23,7 @@ lfcl/pipeline/parameters.py (checked there; ``options()`` records them in ``summ
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from pathlib import Path
@@ -315,6 +316,7 @@ class Demosaic:
             "pattern": mosaic.pattern, "geometry": gridded.metadata["geometry"],
             "iterations": result.iterations, "stop_reason": result.stop_reason,
             "noise_sigma": None if result.noise is None else result.noise.sigma,
+            "noise": None if result.noise is None else dataclasses.asdict(result.noise),
             "input": mosaic.metadata(), "generator": f"lfcl {__version__} stages",
             **{k: v for k, v in gridded.metadata.items() if k != "geometry"}, **extra,
         }

@@ -90,20 +90,20 @@ class EpiSetting:
     xc_per_lam: float = 0.0  # lam_xc = xc_per_lam * lam: the cross-channel block along the epipolar lines (0: none)
 
 
-#: admm-epi's defaults by noise level, fitted by research/fit_epi.py on training seeds (docs/admm.md,
-#: "admm-epi"). Between rows :func:`epi_setting` interpolates lam_per_sigma, fb_per_lam, xc_per_lam,
-#: change_per_sigma and the iterations in log sigma and takes the start of the nearer row; outside, the end row's.
-#: xc_per_lam (the cross-channel block along the lines): research/fit_epi.py trace --xc on the training seeds, 1 at
-#: 0.5-2 lux (+0.24 / +0.26 dB mean centre gain), 0 from 12 lux (within 0.03 dB, worse worst case; docs/admm.md).
+#: admm-epi's defaults by noise level, fitted by research/fit_epi.py on training seeds with the noise model
+#: `lfcl process` reads (the DNG's noise profile; docs/admm.md, "admm-epi"). Between rows :func:`epi_setting`
+#: interpolates lam_per_sigma, fb_per_lam, xc_per_lam, change_per_sigma and the iterations in log sigma and takes
+#: the start of the nearer row; outside, the end row's. The cross-channel block along the lines (xc_per_lam) won
+#: at every level (research/fit_epi_fit_48.json).
 EPI_SCHEDULE = (  # the median sigma of the training captures at 0.5, 2, 12 and 50 lux
-    EpiSetting(sigma=1.25e-3, lam_per_sigma=0.2, fb_per_lam=0.3, change_per_sigma=0.1, iterations=20, start="guarded",
+    EpiSetting(sigma=1.03e-3, lam_per_sigma=0.4, fb_per_lam=0.3, change_per_sigma=0.02, iterations=20, start="guarded",
                xc_per_lam=1.0),
-    EpiSetting(sigma=2.6e-3, lam_per_sigma=0.1, fb_per_lam=1.0, change_per_sigma=0.05, iterations=20, start="guarded",
+    EpiSetting(sigma=1.92e-3, lam_per_sigma=0.2, fb_per_lam=0.3, change_per_sigma=0.05, iterations=20, start="guarded",
                xc_per_lam=1.0),
-    EpiSetting(sigma=1.0e-2, lam_per_sigma=0.1, fb_per_lam=1.0, change_per_sigma=0.05, iterations=20, start="malvar",
-               xc_per_lam=0.0),
-    EpiSetting(sigma=3.5e-2, lam_per_sigma=0.1, fb_per_lam=1.0, change_per_sigma=0.05, iterations=20, start="malvar",
-               xc_per_lam=0.0),
+    EpiSetting(sigma=4.6e-3, lam_per_sigma=0.2, fb_per_lam=1.0, change_per_sigma=0.1, iterations=20, start="malvar",
+               xc_per_lam=1.0),
+    EpiSetting(sigma=9.24e-3, lam_per_sigma=0.4, fb_per_lam=1.0, change_per_sigma=0.2, iterations=20, start="malvar",
+               xc_per_lam=1.0),
 )
 
 #: lfcl.depth.estimate_disparity's options for admm-epi (its own defaults otherwise): without the half-aperture

@@ -194,10 +194,13 @@ def stress_command(lenses, only, with_reference, as_json, device):
               help="Lenses per side of every capture (real light fields: a centre crop).")
 @click.option("--seed", type=click.IntRange(min=0), default=7, show_default=True,
               help="Scene and noise seed (the defaults were fitted on seeds 1 and 2).")
+@click.option("--noise", "noise_text", default="profile,raw", show_default=True, metavar="SOURCE,...",
+              help="Where the methods' noise model comes from: 'profile' (the DNG's NoiseProfile) and/or 'raw' "
+                   "(estimated from the raw, as for a raw without one).")
 @click.option("--json", "as_json", is_flag=True, help="Print the rows as JSON instead of a table.")
 @device_option
 @user_errors
-def matrix_command(scenes, shared, lux_text, methods, lenses, seed, as_json, device):
+def matrix_command(scenes, shared, lux_text, methods, lenses, seed, noise_text, as_json, device):
     """Every scene and real light field x light level x method: PSNR against Malvar, the worst cell first."""
     from ...bench import matrix
     from ...evaluation.evaluate import check_methods
@@ -207,9 +210,11 @@ def matrix_command(scenes, shared, lux_text, methods, lenses, seed, as_json, dev
     method_list = check_methods([m.strip() for m in methods.split(",") if m.strip()])
     lux = matrix.parse_lux(lux_text)
     progress = None if as_json else (lambda r: click.echo(
-        f"  {r['capture']} {r['lux']:g} lux {r['method']}: {r['centre_gain']:+.2f} / {r['mean_gain']:+.2f} dB", err=True))
+        f"  {r['capture']} {r['lux']:g} lux {r['noise']} {r['method']}: {r['centre_gain']:+.2f} / "
+        f"{r['mean_gain']:+.2f} dB", err=True))
+    noise = tuple(n.strip() for n in noise_text.split(",") if n.strip())
     rows = matrix.run(scene_list, matrix.real_lightfields(shared), lux, method_list, lenses=lenses, seed=seed,
-                      device=device, progress=progress)
+                      noise_sources=noise, device=device, progress=progress)
     click.echo(json.dumps(rows, indent=2) if as_json else matrix.format_rows(rows))
 
 

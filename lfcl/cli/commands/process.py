@@ -364,6 +364,11 @@ def summary_text(raw, out_dir, summary: dict) -> str:
         method = f"auto -> {auto['method']}{strength}{start} ({auto['reason']})\n  ran {auto['method']}"
         start = ""
     lines.append(f"method {method}{start}: {summary['iterations']} iterations ({summary['stop_reason']}){lam}{stop}")
+    noise = summary.get("noise")
+    if noise:
+        origin = ("the DNG's noise profile" if noise["source"] == "dng-noise-profile" else
+                  f"estimated from the raw: {noise['method']}")
+        lines.append(f"noise: sigma {noise['sigma']:.3g} ({origin})")
     net = params.get("safety_net")
     if net and not net["lenses"]:
         lines.append(f"safety net: {net['why']}")
