@@ -459,6 +459,7 @@ def test_epi_default_budget_caps_a_cpu_device_that_shares_the_host_memory():
 
 def test_colour_differences_device_matches_the_twins(runtime, rng):
     from lfcl.ops.crosschannel import ColourDifferences, colour_differences_adjoint_np, colour_differences_np
+    from lfcl.testing import dottest
 
     H, W = 7, 19  # n = 133: a short last chunk
     x = rng.standard_normal((3, H, W)).astype(np.float32)
@@ -476,6 +477,18 @@ def test_colour_differences_device_matches_the_twins(runtime, rng):
         op.adjoint(runtime.to_device(y), accumulate=True)
     with pytest.raises(ValueError, match="3 colour planes"):
         ColourDifferences(runtime, (2, H, W))
+    # a batch: each image on its own (the u and v halves of an EPI gradient)
+    batch = rng.standard_normal((2, 3, H, W)).astype(np.float32)
+    ys = rng.standard_normal((2, 2, H, W)).astype(np.float32)
+    op2 = ColourDifferences(runtime, (3, H, W), batch=2)
+    assert op2.in_shape == (2, 3, H, W) and op2.out_shape == (2, 2, H, W)
+    np.testing.assert_array_equal(op2.forward(runtime.to_device(batch)).get(),
+                                  np.stack([colour_differences_np(b) for b in batch]))
+    np.testing.assert_array_equal(op2.adjoint(runtime.to_device(ys)).get(),
+                                  np.stack([colour_differences_adjoint_np(y) for y in ys]))
+    assert dottest(op2, runtime, rng=np.random.default_rng(3)) <= 1e-6
+    with pytest.raises(ValueError, match="batch"):
+        ColourDifferences(runtime, (3, H, W), batch=0)
 
 
 def test_cross_block_device_matches_its_twin_and_the_epi_differences(runtime, rng):
@@ -491,8 +504,9 @@ def test_cross_block_device_matches_its_twin_and_the_epi_differences(runtime, rn
     twin = epi_cross_gradient_np(x, disparity, (U, V), confidence)
     np.testing.assert_allclose(twin, np.stack([planes[:, 0] - planes[:, 1], planes[:, 2] - planes[:, 1]], axis=1),
                                atol=1e-12)
-    op = EpiCrossGradient(runtime, x.shape, (U, V))
-    op.set_maps(disparity, confidence)
+    epi = EpiGradient(runtime, x.shape, (U, V))
+    epi.set_maps(disparity, confidence)
+    op = EpiCrossGradient(runtime, epi)  # D_epi C as C D_epi, on the EPI block's operator
     assert op.gradient_shape == (2, 2, S * U, T * V)
     x32, z32 = x.astype(np.float32), z.astype(np.float32)
     np.testing.assert_allclose(op.forward(runtime.to_device(x32)).get(),
@@ -513,9 +527,12 @@ def test_cross_block_and_colour_differences_pass_the_dot_test(runtime, rng):
     S, T, U, V = 5, 4, 9, 9
     assert dottest(ColourDifferences(runtime, (3, 7, 19)), runtime, rng=np.random.default_rng(1)) <= 1e-6
     disparity, confidence = maps(rng, S, T, spread=3.0)
-    op = EpiCrossGradient(runtime, (3, S * U, T * V), (U, V))
-    op.set_maps(disparity, confidence)
+    epi = EpiGradient(runtime, (3, S * U, T * V), (U, V))
+    epi.set_maps(disparity, confidence)
+    op = EpiCrossGradient(runtime, epi)
     assert dottest(op, runtime, rng=np.random.default_rng(2)) <= 1e-5
+    with pytest.raises(ValueError, match="3-colour EPI operator"):
+        EpiCrossGradient(runtime, EpiGradient(runtime, (2, S * U, T * V), (U, V)))
     x = rng.standard_normal((3, S * U, T * V))
     y = rng.standard_normal((2, 2, S * U, T * V))
     lhs = np.vdot(epi_cross_gradient_np(x, disparity, (U, V), confidence), y)
@@ -546,7 +563,7 @@ def test_cross_block_gram_diagonal_is_colour_gram_times_the_epi_diagonal(runtime
     expected = cfa_adjoint_np(np.tile(weights, (S, T)), "GRBG") + rho * (epi + fallback + probed)
     solver = EpiAdmmSolver(runtime, (H, W), "GRBG", (U, V))
     solver.prepare(AdmmParams(lam=0.01, lam_xc=0.02, rho=rho), EpiPrior(disparity, confidence, lam_fb=0.01), weights)
-    assert [lam for _, lam in solver.blocks] == [0.01, 0.01, 0.02] and solver.blocks[2][0] is solver.cross
+    assert [lam for _, lam in solver.blocks] == [0.01, 0.02, 0.01] and solver.blocks[1][0] is solver.cross
     got = solver.precondition(runtime.to_device(np.ones((3, H, W), np.float32)), runtime.empty((3, H, W)), rho).get()
     np.testing.assert_allclose(got, 1 / expected, rtol=1e-5)
 
@@ -567,7 +584,7 @@ def test_solver_with_the_cross_block_matches_the_float64_reference(runtime, rng,
     expected = admm_epi_reference(b, pattern, (U, V), params, x0, prior, lens_weights=weights)
     solver = EpiAdmmSolver(runtime, b.shape, pattern, (U, V))
     got = solver.solve(runtime.to_device(b), runtime.to_device(x0), params, prior, lens_weights=weights)
-    assert len(solver.blocks) == (3 if lam_fb else 2) and solver.blocks[-1] == (solver.cross, 0.015)
+    assert len(solver.blocks) == (3 if lam_fb else 2) and solver.blocks[1] == (solver.cross, 0.015)
     assert_matches_the_reference(got, expected, iterations=8)
     # the block changes the answer (it is not a no-op), and its objective counts lam_xc ||D_epi C x||_1
     plain = admm_epi_reference(b, pattern, (U, V), dataclasses.replace(params, lam_xc=0.0), x0, prior,

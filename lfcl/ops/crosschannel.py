@@ -53,26 +53,34 @@ def colour_differences_adjoint_np(y: np.ndarray) -> np.ndarray:
 
 
 class ColourDifferences:
-    """C and C^T on the device (lfcl/kernels/colourdiff.cl): ``[3, H, W]`` <-> ``[2, H, W]``.
+    """C and C^T on the device (lfcl/kernels/colourdiff.cl): ``[3, H, W]`` <-> ``[2, H, W]``, or with
+    ``batch`` B > 1 ``[B, 3, H, W]`` <-> ``[B, 2, H, W]`` (each of B images on its own: the u and v halves of
+    an EPI gradient).
 
     The twins are :func:`colour_differences_np` and :func:`colour_differences_adjoint_np`; admm-epi's
-    cross-channel block composes it with the EPI differences (lfcl/solvers/epi.py).
+    cross-channel block applies it to the EPI differences (lfcl/solvers/epi.py).
     """
 
-    def __init__(self, runtime, planes_shape):
+    def __init__(self, runtime, planes_shape, batch: int = 1):
         self.runtime = runtime
         channels, height, width = (int(n) for n in planes_shape)
         if channels != 3:
             raise ValueError(f"the colour differences need 3 colour planes, got {channels}")
-        self.in_shape, self.out_shape = (3, height, width), (2, height, width)
-        self._n = height * width
+        if isinstance(batch, bool) or not isinstance(batch, int) or batch < 1:
+            raise ValueError(f"batch must be an integer >= 1, got {batch!r}")
+        lead = (batch,) if batch > 1 else ()
+        self.in_shape, self.out_shape = (*lead, 3, height, width), (*lead, 2, height, width)
+        self._n, self._batch = height * width, batch
+
+    def _size(self):
+        return (*elementwise_size(self._n), self._batch)
 
     def forward(self, x, out=None):
         """out = C x."""
         check_device_array(x, self.in_shape, "x")
         out = output(self.runtime, out, self.out_shape)
         if self._n:
-            self.runtime.launch("colourdiff", "colour_differences", elementwise_size(self._n), x.data, out.data,
+            self.runtime.launch("colourdiff", "colour_differences", self._size(), x.data, out.data,
                                 np.uint64(self._n))
         return out
 
@@ -83,7 +91,7 @@ class ColourDifferences:
             raise ValueError("accumulate needs an out array to add to")
         out = output(self.runtime, out, self.in_shape)
         if self._n:
-            self.runtime.launch("colourdiff", "colour_differences_adjoint", elementwise_size(self._n), y.data,
+            self.runtime.launch("colourdiff", "colour_differences_adjoint", self._size(), y.data,
                                 out.data, np.uint64(self._n), np.int32(bool(accumulate)))
         return out
 

@@ -179,8 +179,8 @@ def epi_solver_bytes(sensor_shape, fallback: bool, cross_channel: bool = False) 
     # planes: the start, x, previous x, rhs, 4 CG vectors; K x scratch (2 planes); z, u per block (2 x 2 planes);
     # per block the rays (d, w per sample); the mosaic and diag(K^T K)
     floats = 8 * planes + 2 * planes + blocks * (4 * planes + 2 * H * W) + 2 * H * W
-    if cross_channel:  # z, u ([2, 2, H, W] each), the rays, C x [2, H, W] and diag(D^T D) [H, W]
-        floats += 2 * 4 * H * W + 2 * H * W + 2 * H * W + H * W
+    if cross_channel:  # z, u and the K x scratch ([2, 2, H, W] each) and diag(D^T D) [H, W]
+        floats += 3 * 4 * H * W + H * W
     return 4 * floats
 
 
@@ -195,34 +195,44 @@ def epi_cross_adjoint_np(z, disparity, pitch, confidence=None, matrix=None) -> n
 
 
 class EpiCrossGradient:
-    """The cross-channel block ``D_epi(d, w) C`` on the device: the EPI differences (a 2-channel
-    :class:`~lfcl.ops.epi.EpiGradient`) of the colour differences ``C x`` (:class:`~lfcl.ops.crosschannel.
-    ColourDifferences`), ``[3, H, W]`` -> ``[2, 2, H, W]``. Twins: :func:`epi_cross_gradient_np`,
-    :func:`epi_cross_adjoint_np`. :meth:`set_maps` as EpiGradient's.
+    """The cross-channel block ``D_epi(d, w) C`` on the device, ``[3, H, W]`` -> ``[2, 2, H, W]``, computed as
+    ``C D_epi``: the EPI differences have the same taps and weights in every colour, so the differences of the
+    colour differences are the colour differences of the differences. It shares ``epi`` (the 3-colour
+    :class:`~lfcl.ops.epi.EpiGradient` of the EPI block, its maps and its gathers): next to that block the
+    solver gets ``D_epi C x`` from ``D_epi x`` by :meth:`of_gradient` and folds the adjoint into the EPI
+    block's with :meth:`fold` (one gather and one scatter for both blocks instead of two of each). Twins:
+    :func:`epi_cross_gradient_np`, :func:`epi_cross_adjoint_np` (``D_epi C`` and ``C^T D_epi^T`` as written).
     """
 
-    def __init__(self, runtime, planes_shape, pitch):
-        channels, height, width = (int(n) for n in planes_shape)
-        self.colour = ColourDifferences(runtime, (channels, height, width))
-        self.epi = EpiGradient(runtime, (2, height, width), pitch)
-        self.planes_shape = (3, height, width)
-        self.gradient_shape = self.epi.gradient_shape
-        self._differences = runtime.empty((2, height, width))  # C x, D^T z
+    def __init__(self, runtime, epi):
+        if epi.channels != 3:
+            raise ValueError(f"the cross block needs the 3-colour EPI operator, got {epi.channels} channels")
+        self.epi = epi
+        self.planes_shape = epi.planes_shape
+        self.colour = ColourDifferences(runtime, epi.planes_shape, batch=2)  # the u and v halves
+        self.gradient_shape = self.colour.out_shape
+        self._runtime, self._gradient = runtime, None  # D_epi x, C^T z of forward / adjoint (made on first use)
 
-    def set_maps(self, disparity, confidence=None):
-        self.epi.set_maps(disparity, confidence)
+    def _buffer(self):
+        if self._gradient is None:
+            self._gradient = self._runtime.empty(self.epi.gradient_shape)
+        return self._gradient
+
+    def of_gradient(self, gradient, out=None):
+        """C applied to each half of an EPI gradient ``D_epi x`` [2, 3, H, W]: ``D_epi C x`` [2, 2, H, W]."""
+        return self.colour.forward(gradient, out)
+
+    def fold(self, z, gradient):
+        """``gradient += C^T z``: afterwards ``D_epi^T gradient`` is the sum of both blocks' adjoints."""
+        return self.colour.adjoint(z, gradient, accumulate=True)
 
     def forward(self, x, out=None):
         """D_epi C x."""
-        return self.epi.forward(self.colour.forward(x, self._differences), out)
+        return self.of_gradient(self.epi.forward(x, self._buffer()), out)
 
     def adjoint(self, z, out=None, accumulate: bool = False):
         """C^T D_epi^T z; with ``accumulate`` added into ``out``."""
-        return self.colour.adjoint(self.epi.adjoint(z, self._differences), out, accumulate)
-
-    def diagonal(self, out=None, accumulate: bool = False):
-        """diag(D_epi^T D_epi) [H, W]; the block's diagonal is that of C^T C, (1, 2, 1), times it."""
-        return self.epi.diagonal(out, accumulate)
+        return self.epi.adjoint(self.colour.adjoint(z, self._buffer()), out, accumulate)
 
 
 class EpiAdmmSolver:
@@ -246,10 +256,10 @@ class EpiAdmmSolver:
         self.reduce = Reductions(runtime)
         self._rhs, self._x_prev = runtime.empty(self.planes_shape), runtime.empty(self.planes_shape)
         self._cg = [runtime.empty(self.planes_shape) for _ in range(4)]
-        # K_b x, z - u, dz: the largest block's shape; a smaller block uses its leading part (_scratch_for)
+        # K_b x, z - u, dz of the EPI and fall-back blocks (one after the other); the cross block has its own
         self._scratch = runtime.empty(self.epi.gradient_shape)
         self._kdiag = runtime.empty((self.height, self.width))
-        self._xdiag = None  # diag(D_epi^T D_epi) of the cross block, with it
+        self._xdiag = self._cross_scratch = None  # diag(D_epi^T D_epi) and the scratch of the cross block, with it
         self._state: dict = {}  # (z, u) per block operator, of its gradient shape
         n = self._scratch.size
         self._chunks = -(-n // 16)  # the z/u step runs this many chunks for every block (past its end: sums of 0)
@@ -266,40 +276,52 @@ class EpiAdmmSolver:
         self._weights.set(np.ascontiguousarray(weights.ravel()))
 
     def prepare(self, params: AdmmParams, prior: EpiPrior, lens_weights=None):
-        """Upload the maps and weights, build diag(K^T K) and the blocks (op, lam) for ``params``."""
+        """Upload the maps and weights, build diag(K^T K) and the blocks (op, lam) for ``params``.
+
+        The blocks run in the order EPI, cross-channel (lam_xc > 0), fall-back (where the confidence is
+        below 1): the cross block's ``K x`` comes from the EPI block's and its adjoint folds into the EPI
+        block's gather (:class:`EpiCrossGradient`), so those two share one ``D_epi`` and one ``D_epi^T``."""
         _check_params(params)
         self.set_lens_weights(lens_weights)
         disparity, confidence = prior.maps(self.lenses)
         self.epi.set_maps(disparity, confidence)
         self.blocks = [(self.epi, params.lam)]
-        if prior.has_fallback(self.lenses):
-            self.fallback.set_maps(np.zeros_like(disparity), 1 - confidence)
-            self.blocks.append((self.fallback, prior.lam_fb))
-        for i, (op, _) in enumerate(self.blocks):
-            op.diagonal(self._kdiag, accumulate=i > 0)
+        self.epi.diagonal(self._kdiag)
         if params.cross_channel:  # the same lines and weights as the EPI block, on the colour differences
             if self.cross is None:
-                self.cross = EpiCrossGradient(self.runtime, self.planes_shape, (self.U, self.V))
+                self.cross = EpiCrossGradient(self.runtime, self.epi)
                 self._xdiag = self.runtime.empty((self.height, self.width))
-            self.cross.set_maps(disparity, confidence)
-            self.cross.diagonal(self._xdiag)  # times (1, 2, 1) per colour in epi_jacobi
+                self._cross_scratch = self.runtime.empty(self.cross.gradient_shape)
+            self.vectors.copy(self._kdiag, self._xdiag)  # diag(D_epi^T D_epi); times (1, 2, 1) in epi_jacobi
             self.blocks.append((self.cross, params.lam_xc))
+        if prior.has_fallback(self.lenses):
+            self.fallback.set_maps(np.zeros_like(disparity), 1 - confidence)
+            self.fallback.diagonal(self._kdiag, accumulate=True)
+            self.blocks.append((self.fallback, prior.lam_fb))
         for op, _ in self.blocks:
             if op not in self._state:
                 self._state[op] = (self.runtime.empty(op.gradient_shape), self.runtime.empty(op.gradient_shape))
         self._states = [self._state[op] for op, _ in self.blocks]
-        self._scratches = [self._scratch_for(op) for op, _ in self.blocks]
-
-    def _scratch_for(self, op):
-        """The shared scratch as ``op``'s gradient shape (its leading part: a view, offset 0)."""
-        shape = tuple(op.gradient_shape)
-        if shape == tuple(self._scratch.shape):
-            return self._scratch
-        return self._scratch.reshape(-1)[:math.prod(shape)].reshape(shape)
+        self._scratches = [self._cross_scratch if op is self.cross else self._scratch for op, _ in self.blocks]
 
     @property
     def _has_cross(self) -> bool:
         return any(op is self.cross for op, _ in self.blocks)
+
+    def _forward(self, op, x, out):
+        """K_b x into ``out``; the cross block's from the EPI block's ``K x``, which must be in the scratch."""
+        if op is self.cross:
+            return self.cross.of_gradient(self._scratch, out)
+        return op.forward(x, out)
+
+    def _adjoint(self, op, gradient, out, accumulate):
+        """out (+)= K_b^T gradient, the EPI block's once the cross block (next) has folded its own into it."""
+        if op is self.epi and self._has_cross:
+            return None  # the cross block's turn does both
+        if op is self.cross:
+            self.cross.fold(gradient, self._scratch)
+            op, gradient = self.epi, self._scratch
+        return op.adjoint(gradient, out, accumulate)
 
     def _pixelwise(self, kernel, *args):
         self.runtime.launch("epi", kernel, (self.width, self.height), *args, defines=self._defines)
@@ -307,7 +329,7 @@ class EpiAdmmSolver:
     def normal(self, src, out, rho):
         """out = (A^T W A + rho K^T K) src."""
         for i, ((op, _), scratch) in enumerate(zip(self.blocks, self._scratches)):
-            op.adjoint(op.forward(src, scratch), out, accumulate=i > 0)
+            self._adjoint(op, self._forward(op, src, scratch), out, accumulate=i > 1 or (i > 0 and not self._has_cross))
         self._pixelwise("epi_normal_finish", out.data, src.data, self._weights.data, np.float32(rho),
                         np.int32(self.height), np.int32(self.width), self._pattern)
         return out
@@ -324,15 +346,15 @@ class EpiAdmmSolver:
         """out = A^T W b + rho K^T (z - u)."""
         for i, ((op, _), (z, u), scratch) in enumerate(zip(self.blocks, self._states, self._scratches)):
             self.vectors.axpby(1.0, z, -1.0, u, scratch)
-            op.adjoint(scratch, out, accumulate=i > 0)
+            self._adjoint(op, scratch, out, accumulate=i > 1 or (i > 0 and not self._has_cross))
         self._pixelwise("epi_rhs_finish", out.data, b.data, self._weights.data, np.float32(rho),
                         np.int32(self.height), np.int32(self.width), self._pattern)
         return out
 
     def start(self, x):
         """z = K x, u = 0."""
-        for (op, _), (z, u) in zip(self.blocks, self._states):
-            op.forward(x, z)
+        for (op, _), (z, u), scratch in zip(self.blocks, self._states, self._scratches):
+            self.vectors.copy(self._forward(op, x, scratch), z)
             self.vectors.zero(u)
 
     def solve(self, b, x0, params: AdmmParams, prior: EpiPrior, callback=None, lens_weights=None) -> AdmmResult:
@@ -363,14 +385,17 @@ class EpiAdmmSolver:
             slot = 0
             red.enqueue(slot, "diff_norm2", x, self._x_prev)
             for i, ((op, lam), (z, u), scratch) in enumerate(zip(self.blocks, self._states, self._scratches)):
-                op.forward(x, scratch)
+                if op is not self.cross:  # the cross block's K x was made from the EPI block's, before its z/u step
+                    self._forward(op, x, scratch)
+                if op is self.epi and self._has_cross:
+                    self._forward(self.cross, x, self._cross_scratch)
                 self.runtime.launch("epi", "epi_zu", size, scratch.data, z.data, u.data, self._primal_part.data,
                                     self._l1_part.data, np.float32(lam / rho), np.uint64(scratch.size),
                                     np.uint64(self._chunks), defines=self._defines)
                 red.enqueue(slot + 1, "sum", self._primal_part)
                 red.enqueue(slot + 2, "sum", self._l1_part)
                 slot += 2
-                op.adjoint(scratch, dual, accumulate=i > 0)  # K^T (z - z_prev)
+                self._adjoint(op, scratch, dual, accumulate=i > 1 or (i > 0 and not self._has_cross))  # K^T dz
             red.enqueue(slot + 1, "norm2", dual)
             self.runtime.launch("epi", "epi_misfit_rows", (self.height,), x.data, b.data, self._weights.data,
                                 self._misfit_rows.data, np.int32(self.height), np.int32(self.width), self._pattern,
