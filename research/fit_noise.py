@@ -19,19 +19,12 @@ import math
 import time
 
 import numpy as np
+from fit_epi import REAL, capture  # the same captures as admm-epi's fit and table (research/fit_epi.py)
 
 import lfcl.noise.epipolar as epipolar
 import lfcl.noise.model as model
-from lfcl.evaluation.evaluate import simulated_capture
 
-REAL = {"antinous": "../shared/realdata/hci_epinet/antinous", "lytro2067": "../shared/realdata/lytro_epinet/2067"}
 GRID = {"quantile": (0.05, 0.02), "tolerance": (0.08, 0.12, 0.2), "min_pairs": (4, 6)}
-
-
-def capture(scene, seed, lux, lenses):
-    if scene in REAL:
-        return simulated_capture(lenses, lux, seed, lightfield=REAL[scene])
-    return simulated_capture(lenses, lux, seed, scene)
 
 
 def sweep(args):

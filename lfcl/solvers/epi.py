@@ -93,16 +93,17 @@ class EpiSetting:
 #: admm-epi's defaults by noise level, fitted by research/fit_epi.py on training seeds with the noise model
 #: `lfcl process` reads (the DNG's noise profile; docs/admm.md, "admm-epi"). Between rows :func:`epi_setting`
 #: interpolates lam_per_sigma, fb_per_lam, xc_per_lam, change_per_sigma and the iterations in log sigma and takes
-#: the start of the nearer row; outside, the end row's. The cross-channel block along the lines (xc_per_lam) won
-#: at every level (research/fit_epi_fit_48.json).
+#: the start of the nearer row; outside, the end row's. The cross-channel block along the lines (xc_per_lam) won at
+#: every level; the fall-back (fb_per_lam > 0, with the rays weighted by the disparity's confidence) lost at every
+#: level to the EPI prior on every ray (research/fit_epi_fit_48.json: depth "trusted" against "shipped").
 EPI_SCHEDULE = (  # the median sigma of the training captures at 0.5, 2, 12 and 50 lux
-    EpiSetting(sigma=1.03e-3, lam_per_sigma=0.4, fb_per_lam=0.3, change_per_sigma=0.02, iterations=20, start="guarded",
+    EpiSetting(sigma=1.03e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.02, iterations=20, start="guarded",
                xc_per_lam=1.0),
-    EpiSetting(sigma=1.92e-3, lam_per_sigma=0.2, fb_per_lam=0.3, change_per_sigma=0.05, iterations=20, start="guarded",
+    EpiSetting(sigma=1.92e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.05, iterations=20, start="guarded",
                xc_per_lam=1.0),
-    EpiSetting(sigma=4.6e-3, lam_per_sigma=0.2, fb_per_lam=1.0, change_per_sigma=0.1, iterations=20, start="malvar",
+    EpiSetting(sigma=4.6e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.05, iterations=20, start="malvar",
                xc_per_lam=1.0),
-    EpiSetting(sigma=9.24e-3, lam_per_sigma=0.4, fb_per_lam=1.0, change_per_sigma=0.2, iterations=20, start="malvar",
+    EpiSetting(sigma=9.24e-3, lam_per_sigma=0.4, fb_per_lam=0.0, change_per_sigma=0.05, iterations=20, start="malvar",
                xc_per_lam=1.0),
 )
 
@@ -511,7 +512,9 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     depth = estimate_disparity(raw_mosaic, pattern, pitch, origin=origin, noise=noise, device=device,
                                **(EPI_DEPTH_OPTIONS if depth_options is None else depth_options))
     depth_seconds = time.perf_counter() - began
-    prior = EpiPrior(depth.disparity, depth.confidence, lam_fb=float(lam_fb))
+    # The confidence splits the prior between the epipolar lines and the fall-back: without a fall-back every ray
+    # keeps its full weight (a low-confidence lens would otherwise be left with almost no prior).
+    prior = EpiPrior(depth.disparity, depth.confidence if lam_fb > 0 else None, lam_fb=float(lam_fb))
     U = int(pitch[0])
     S = H // U
     budget = int(max_memory) if max_memory is not None else epi_default_budget(runtime.device)
