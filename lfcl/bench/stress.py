@@ -212,8 +212,9 @@ def build_cases(lenses=(8, 8), groups=None) -> list[Case]:
         cases.append(Case("1x1 lenses, no noise profile, defaults", "shape", one.normalised_raw(), one.pattern, (9, 9),
                           expect="either", note="the noise cannot be estimated from one lens"))
         cases.append(Case("1x1 lenses, no noise profile, lam+iterations", "shape", one.normalised_raw(), one.pattern,
-                          (9, 9), kwargs={"lam": 0.001, "iterations": 5},
-                          note="neither lam nor the stopping rule needs a noise level"))
+                          (9, 9), kwargs={"lam": 0.001, "iterations": 5}, refusable=("auto", "linear4d"),
+                          note="neither lam nor the stopping rule needs a noise level; auto's pick and linear4d's "
+                               "filter do (refusing is fine)"))
         cases.append(_shape_case(f"1x{T} lenses", simulate("charts", lenses=(1, T), lux=12.0, seed=0)))
         cases.append(_shape_case(f"{S}x1 lenses", simulate("charts", lenses=(S, 1), lux=12.0, seed=0)))
         cases.append(_shape_case("3x5 lenses", simulate("charts", lenses=(3, 5), lux=12.0, seed=0)))
