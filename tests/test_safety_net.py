@@ -99,5 +99,8 @@ def test_process_summary_says_what_the_net_did(tmp_path):
     assert "safety net: " in text.output and "lenses took Malvar's colour means" in text.output
     summary = json.loads((tmp_path / "text" / "summary.json").read_text())
     assert summary["method"] == DEFAULT_METHOD and summary["parameters"]["safety_net"]["lenses"] == 144
+    # where the noise model came from (docs/noise.md): the simulated DNG carries a NoiseProfile
+    assert "noise: sigma " in text.output and "(the DNG's noise profile)" in text.output
+    assert summary["noise"]["source"] == "dng-noise-profile" and summary["noise"]["sigma"] == summary["noise_sigma"]
     off = CliRunner().invoke(cli, [*base, "--no-safety-net", "-o", str(tmp_path / "off"), "--json"])
     assert off.exit_code == 0 and "safety_net" not in json.loads(off.stdout)["parameters"]
