@@ -279,6 +279,12 @@ def per_iteration(seconds: float, first_seconds: float, iterations: int) -> floa
     return max(seconds - first_seconds, 0.0) / (iterations - 1)
 
 
+def _ratio(reference: float, device: float) -> float | None:
+    """reference / device; None where the device's time per iteration came out 0 (T(k) <= T(1) within the timer's
+    noise: a tiny problem on a busy machine), as the kernel table does."""
+    return reference / device if device > 0 else None
+
+
 def admm_iteration(capture: Capture, methods=ADMM_METHODS, iterations: int = 5, cg_steps: int = 4,
                    repeats: int = 3, reference_repeats: int = 1, device=None, progress=None) -> dict:
     """Seconds per ADMM iteration of AdmmSolver and admm_reference (fixed CG steps, cg_tol = 0)."""
@@ -348,8 +354,8 @@ def admm_iteration(capture: Capture, methods=ADMM_METHODS, iterations: int = 5, 
             per = per_iteration(ref_timing.median, ref_first.median, ref[-1].iterations)
             row.update(reference_seconds=ref_timing.median, reference_times=ref_timing.times,
                        reference_iterations=ref[-1].iterations, reference_per_iteration=per,
-                       speedup=per / row["device_per_iteration"],
-                       speedup_default=per / row["default_per_iteration"],
+                       speedup=_ratio(per, row["device_per_iteration"]),
+                       speedup_default=_ratio(per, row["default_per_iteration"]),
                        max_abs_diff=float(np.max(np.abs(device_result.x.get() - ref[-1].x))))
         rows.append(row)
     shape = LightFieldShape.from_sensor(mosaic.shape, pitch)
