@@ -44,7 +44,7 @@ class AutoResolution:
 
 
 def resolve_auto(mosaic: np.ndarray, pattern: str, grid, *, noise: NoiseEstimate | None = None,
-                 view: str = "both") -> AutoResolution:
+                 view: str = "both", device=None) -> AutoResolution:
     """``auto`` on ``mosaic`` (normalised, not flat-fielded) of ``grid``: lfcl.demosaic.auto.choose once, at the
     sigma the grid's lambda uses, judged on ``view`` (lfcl.demosaic.auto.VIEWS), then made runnable here.
 
@@ -63,7 +63,8 @@ def resolve_auto(mosaic: np.ndarray, pattern: str, grid, *, noise: NoiseEstimate
         from ..noise.model import estimate_noise
         from .lens_ratio import cross_lens_ratio
 
-        noise = noise if noise is not None else estimate_noise(mosaic, pattern, grid.pitch, grid.origin)
+        noise = noise if noise is not None else estimate_noise(mosaic, pattern, grid.pitch, grid.origin,
+                                                               device=device)
         sigma = noise.sigma
         lens_ratio = cross_lens_ratio(mosaic, grid.pitch, noise, grid.lens_response)  # content like the training's?
     else:
@@ -157,7 +158,7 @@ def demosaic_grid(mosaic: np.ndarray, pattern: str | None, grid, method: str, *,
     mosaic = _checked_mosaic(mosaic, pattern, grid)
     auto = None
     if method == "auto":
-        auto = resolve_auto(mosaic, pattern, grid, noise=noise, view=auto_view)
+        auto = resolve_auto(mosaic, pattern, grid, noise=noise, view=auto_view, device=device)
         method, strength, noise = auto.method, strength * auto.strength, auto.noise
         start = start if start is not None else auto.start
         skip_flat = skip_flat if method in SKIPPABLE else None

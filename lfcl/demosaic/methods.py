@@ -213,7 +213,7 @@ def flat_threshold_for(method: str, skip_flat) -> float | None:
     return float(skip_flat)
 
 
-def _noise_model_or_why(noise, raw_mosaic, pattern, pitch, origin, asked) -> tuple:
+def _noise_model_or_why(noise, raw_mosaic, pattern, pitch, origin, asked, device=None) -> tuple:
     """(the noise model the flat-lens test and the safety net use, None) or (None, why there is none).
 
     Without a usable model the test cannot run; if it was not ``asked`` for (the default) the
@@ -222,7 +222,7 @@ def _noise_model_or_why(noise, raw_mosaic, pattern, pitch, origin, asked) -> tup
     why = None
     if noise is None:
         try:
-            noise = estimate_noise(raw_mosaic, pattern, pitch, origin)
+            noise = estimate_noise(raw_mosaic, pattern, pitch, origin, device=device)
         except ValueError as e:
             why = f"not tested: no noise model ({e})"
     if why is None and not all(math.isfinite(v) and 0 <= v < 1e30 for v in (noise.gain, noise.floor)):
@@ -244,7 +244,7 @@ def with_safety_net(result: DemosaicResult, mosaic, pattern, pitch, origin, lens
         return dataclasses.replace(result, parameters={**result.parameters, "safety_net": report})
     began = time.perf_counter()
     mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
-    noise, why = _noise_model_or_why(result.noise, mosaic, pattern, pitch, origin, asked=None)
+    noise, why = _noise_model_or_why(result.noise, mosaic, pattern, pitch, origin, asked=None, device=device)
     if noise is None:  # a raw too small to estimate the noise from: the outputs say the net did not act
         report = {"lenses": 0, "lenses_from_malvar": 0, "why": why.replace("not tested", "not applied")}
         return dataclasses.replace(result, parameters={**result.parameters, "safety_net": report})
@@ -300,7 +300,7 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
     if method == "linear4d":  # learned 4D linear filter, coefficients picked by the noise (docs/linear4d.md)
         from ..ops.linear4d import linear4d
 
-        noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
+        noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin, device=device)
         planes = linear4d(runtime, mosaic, pattern, pitch, origin, noise)
         _check_finite(planes, "linear4d", mosaic)
         return DemosaicResult(planes, method, {}, 0, time.perf_counter() - began, "direct", [], noise)
@@ -315,14 +315,14 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
     if method == "admm-epi" and start is None and (noise is not None or lam is None or iterations is None):
         from ..solvers.epi import epi_start
 
-        noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
+        noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin, device=device)
         start, epi_start_replaced = epi_start(noise.sigma, pitch)
     start = start or "malvar"
     guard = None
     if start in ("linear4d", "guarded"):
         from ..ops.linear4d import linear4d_operator
 
-        noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin)
+        noise = noise if noise is not None else estimate_noise(raw_mosaic, pattern, pitch, origin, device=device)
         x0 = linear4d_operator(runtime, mosaic, pattern, pitch, origin, noise).forward(b)
         if start == "guarded":  # Malvar in the lenses where linear4d breaks (lfcl/demosaic/guarded_start.py)
             from .guarded_start import guarded_start
@@ -338,7 +338,7 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
     needs_sigma = lam is None or tolerance_db is not None or (iterations is None and defaults.change_per_sigma > 0) \
         or (defaults.dims == "epi" and iterations is None)  # its stop follows the noise (lfcl/solvers/epi.py)
     if noise is None and needs_sigma:
-        noise = estimate_noise(raw_mosaic, pattern, pitch, origin)  # the noise of the raw, as lambda expects
+        noise = estimate_noise(raw_mosaic, pattern, pitch, origin, device=device)  # the raw's, as lambda expects
     sigma = noise.sigma if noise is not None else 0.0  # unused when lam and iterations are given
     params = admm_params(method, sigma, lam=lam, iterations=iterations, rho=rho, strength=strength,
                          tolerance_db=tolerance_db)
@@ -346,7 +346,8 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
     found, packing, real, full_shape = None, None, None, (3, *mosaic.shape)
     flat_noise, flat_why = None, "not tested (skip_flat off)"
     if flat_threshold is not None:
-        flat_noise, flat_why = _noise_model_or_why(noise, raw_mosaic, pattern, pitch, origin, asked=skip_flat)
+        flat_noise, flat_why = _noise_model_or_why(noise, raw_mosaic, pattern, pitch, origin, asked=skip_flat,
+                                                   device=device)
         noise = noise if noise is not None else flat_noise
     if flat_noise is not None:  # flat lenses get their colour means and leave the solve (lfcl/demosaic/flat_lenses.py)
         statistics = LensFlatness(runtime, mosaic.shape, pattern, pitch, origin)(b, lens_weights, flat_noise.gain,
