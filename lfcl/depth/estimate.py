@@ -144,7 +144,7 @@ def _options(options: dict) -> dict:
     return out
 
 
-def _noise_model(mosaic, pattern, pitch, origin, noise) -> tuple[float, float, dict]:
+def _noise_model(mosaic, pattern, pitch, origin, noise, device=None) -> tuple[float, float, dict]:
     """(gain, floor, metadata) of the Poisson-Gaussian model ``var = gain * x + floor``.
 
     ``noise`` given (lfcl.noise.model.NoiseEstimate): used as is. Else estimated from the raw
@@ -160,7 +160,7 @@ def _noise_model(mosaic, pattern, pitch, origin, noise) -> tuple[float, float, d
     from ..noise.model import estimate_noise
 
     try:
-        est = estimate_noise(mosaic, pattern, pitch, origin)
+        est = estimate_noise(mosaic, pattern, pitch, origin, device=device)
         return float(est.gain), float(est.floor), {"gain": est.gain, "floor": est.floor, "source": est.source}
     except ValueError:
         pass
@@ -336,7 +336,7 @@ def estimate_disparity(mosaic, pattern, pitch, *, origin=(0, 0), noise=None, dev
     U, V, S, T = _checks.grid(mosaic.shape, pitch)
     opts = _options(options)
     origin = (int(origin[0]), int(origin[1]))
-    gain, floor, noise_meta = _noise_model(mosaic, pattern, (U, V), origin, noise)
+    gain, floor, noise_meta = _noise_model(mosaic, pattern, (U, V), origin, noise, device)
     ds = candidates(opts["dmax"], opts["step"])
     seconds = {"noise": time.perf_counter() - t_start}
 

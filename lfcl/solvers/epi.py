@@ -313,6 +313,11 @@ class EpiAdmmSolver:
     def _has_cross(self) -> bool:
         return any(op is self.cross for op, _ in self.blocks)
 
+    def _accumulate(self, i: int) -> bool:
+        """Whether block ``i``'s adjoint adds to the output: every one after the first that writes (with the cross
+        block, the EPI block's adjoint is written at the cross block's turn)."""
+        return i > (1 if self._has_cross else 0)
+
     def _forward(self, op, x, out):
         """K_b x into ``out``; the cross block's from the EPI block's ``K x``, which must be in the scratch."""
         if op is self.cross:
@@ -334,7 +339,7 @@ class EpiAdmmSolver:
     def normal(self, src, out, rho):
         """out = (A^T W A + rho K^T K) src."""
         for i, ((op, _), scratch) in enumerate(zip(self.blocks, self._scratches)):
-            self._adjoint(op, self._forward(op, src, scratch), out, accumulate=i > 1 or (i > 0 and not self._has_cross))
+            self._adjoint(op, self._forward(op, src, scratch), out, accumulate=self._accumulate(i))
         self._pixelwise("epi_normal_finish", out.data, src.data, self._weights.data, np.float32(rho),
                         np.int32(self.height), np.int32(self.width), self._pattern)
         return out
@@ -351,7 +356,7 @@ class EpiAdmmSolver:
         """out = A^T W b + rho K^T (z - u)."""
         for i, ((op, _), (z, u), scratch) in enumerate(zip(self.blocks, self._states, self._scratches)):
             self.vectors.axpby(1.0, z, -1.0, u, scratch)
-            self._adjoint(op, scratch, out, accumulate=i > 1 or (i > 0 and not self._has_cross))
+            self._adjoint(op, scratch, out, accumulate=self._accumulate(i))
         self._pixelwise("epi_rhs_finish", out.data, b.data, self._weights.data, np.float32(rho),
                         np.int32(self.height), np.int32(self.width), self._pattern)
         return out
@@ -400,7 +405,7 @@ class EpiAdmmSolver:
                 red.enqueue(slot + 1, "sum", self._primal_part)
                 red.enqueue(slot + 2, "sum", self._l1_part)
                 slot += 2
-                self._adjoint(op, scratch, dual, accumulate=i > 1 or (i > 0 and not self._has_cross))  # K^T dz
+                self._adjoint(op, scratch, dual, accumulate=self._accumulate(i))  # K^T dz
             red.enqueue(slot + 1, "norm2", dual)
             self.runtime.launch("epi", "epi_misfit_rows", (self.height,), x.data, b.data, self._weights.data,
                                 self._misfit_rows.data, np.int32(self.height), np.int32(self.width), self._pattern,
