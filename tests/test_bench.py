@@ -179,7 +179,12 @@ def test_bench_matrix_rows_and_the_worst_cell_first(tmp_path):
     table = format_rows(rows).splitlines()
     first = min(rows, key=worst)
     assert table[2].startswith(f"| {first['capture']} | 12 | {first['noise']} | {first['method']} |")
-    assert table[-1].startswith(f"worst cell: {first['capture']} at 12 lux, noise from the {first['noise']}")
+    assert table[-2].startswith(f"worst cell: {first['capture']} at 12 lux, noise from the {first['noise']}")
+    below = sum(worst(r) < -0.1 for r in rows)
+    assert table[-1].startswith(f"cells below Malvar - 0.1 dB: {below} of {len(rows)}; of them ")
+    from lfcl.evaluation.evaluate import truth_noise
+
+    assert [r["truth_noise"] for r in rows[:4]] == [truth_noise(capture)] * 4  # one figure per capture and level
     bad = _invoke(["bench", "matrix", "--scenes", "charts", "--lux", "12", "--lenses", "8", "--noise", "guess"])
     assert bad.exit_code != 0 and "noise sources must be among profile, raw" in bad.output
 

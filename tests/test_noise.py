@@ -135,3 +135,50 @@ def test_the_disparity_tiles_spread_over_a_large_raw():
     spread = tiles(500, 40, tile=32, count=3)
     assert [(s0, s1) for s0, s1, _, _ in spread] == [(0, 32), (234, 266), (468, 500)]
     assert all((t0, t1) == (0, 40) for _, _, t0, t1 in spread)
+
+
+def test_truth_noise_reads_the_noise_a_decoded_light_field_carries():
+    """A light field decoded from a real camera carries that camera's noise in every view; truth_noise
+    measures it against the sensor's, and reads a noise-free truth as (near) none."""
+    import dataclasses
+
+    from lfcl.evaluation.evaluate import simulation_capture, truth_noise
+
+    rng = np.random.default_rng(3)
+    flat = np.full((16, 16, 9, 9, 3), 0.4, np.float32)
+    grain = (flat * (1 + 0.08 * rng.standard_normal(flat.shape))).astype(np.float32)
+    ratios = {}
+    for label, field in (("clean", flat), ("grain", grain)):
+        capture = simulation_capture(simulate(lightfield=field, lux=12, seed=1))
+        sensor = from_noise_profile(capture.noise_profile, capture.mosaic).sigma
+        own = float(np.std(capture.truth / capture.truth.mean() - 1.0)) * float(capture.truth.mean())
+        ratios[label] = (truth_noise(capture), own / sensor)
+        assert truth_noise(dataclasses.replace(capture, noise_profile=None)) is None  # nothing to compare with
+    assert ratios["clean"][0] < 0.05  # a flat noise-free truth: nothing of its own
+    measured, expected = ratios["grain"]
+    assert expected > 2 and measured == pytest.approx(expected, rel=0.15), (measured, expected)
+
+
+@pytest.mark.parametrize("lux", [0.5, 2, 12, 50])
+def test_a_flat_wall_reads_the_sensor_noise(lux):
+    """A raw of one brightness (a flat wall, no noise profile): the brightness bins span only the noise, so a
+    free line through them can come out steep; clipping its negative slope kept its intercept, up to 3.4x the
+    noise here. The line is now fitted with both coefficients >= 0."""
+    for seed in (1, 2, 3):
+        wall = simulate(lightfield=np.full((16, 16, 9, 9, 3), 0.4, np.float32), lux=lux, seed=seed)
+        raw = wall.normalised_raw()
+        estimate = estimate_noise(raw, wall.pattern, tuple(wall.geometry.pitch))
+        truth = from_noise_profile(list(wall.sensor.noise_profile()) * 3, raw)
+        assert 0.9 < estimate.sigma / truth.sigma < 1.15, (seed, estimate)
+
+
+def test_the_noise_line_stays_non_negative_and_fits_what_is_left():
+    from lfcl.noise.model import fit_noise_model
+
+    levels = np.repeat(np.linspace(0.1, 0.2, 8), 40)
+    falling = np.repeat(np.linspace(2e-5, 1e-5, 8), 40)  # a free fit's slope < 0: the floor is their mean
+    assert fit_noise_model(levels, falling, bins=8) == pytest.approx((0.0, falling.mean()), rel=1e-6)
+    shot = np.repeat(np.linspace(1e-5, 3e-5, 8), 40)  # through the origin's far side: intercept < 0, refitted at 0
+    gain, floor = fit_noise_model(levels, shot, bins=8)
+    centres = np.linspace(0.1, 0.2, 8)
+    assert floor == 0.0 and gain == pytest.approx(centres @ np.linspace(1e-5, 3e-5, 8) / (centres @ centres), rel=1e-6)

@@ -193,6 +193,27 @@ def simulation_capture(sim) -> Capture:
                    list(sim.sensor.noise_profile()) * 3)
 
 
+def truth_noise(capture: Capture) -> float | None:
+    """The ground truth's own noise as a share of the sensor's (``None`` without a noise profile).
+
+    The raw noise estimate (:func:`lfcl.noise.model.estimate_noise`, what a raw without a profile gets) run on
+    the truth's noise-free mosaic, over the DNG profile's sigma. Texture can only inflate it (as it does the raw's
+    estimate): at 48x48 lenses the rendered scenes read 0 (charts, deadleaves) to 1.3 (finetexture at 50 lux), on
+    a few lenses with no flat ones far more; a light field decoded from a real camera carries that camera's noise,
+    view to view, and a method that removes noise is scored down for removing it (docs/auto.md, "A truth with
+    noise of its own").
+    """
+    from ..noise.model import estimate_noise, from_noise_profile
+    from ..sim.geometry import LensletGeometry
+
+    if capture.noise_profile is None:
+        return None
+    S, T, U, V, _ = capture.truth.shape
+    clean = LensletGeometry((S, T), (U, V)).mosaic(capture.truth, capture.pattern).astype(np.float32)
+    own = estimate_noise(clean, capture.pattern, capture.pitch)
+    return own.sigma / from_noise_profile(capture.noise_profile, capture.mosaic).sigma
+
+
 def simulated_capture(lenses: int | None, lux: float, seed: int = 0, scene: str = "charts",
                       lightfield: str | None = None, texture: str | None = None) -> Capture:
     """A square capture of ``lenses`` x ``lenses`` 9x9 lenses (GRBG) of a built-in scene (its planes

@@ -136,14 +136,20 @@ def fit_noise_model(means: np.ndarray, variances: np.ndarray, bins: int) -> tupl
         if inside.sum() >= 8:
             centres.append(np.median(means[inside]))
             levels.append(np.quantile(variances[inside], QUANTILE))
-    if len(centres) >= 2:
-        gain, floor = np.polyfit(centres, levels, 1)
-    else:
-        gain, floor = 0.0, float(np.quantile(variances, QUANTILE))
-    gain, floor = max(float(gain), 0.0), max(float(floor), 0.0)
-    if gain == 0.0 and floor == 0.0:
+    if len(centres) < 2:
+        return 0.0, float(np.quantile(variances, QUANTILE))
+    centres, levels = np.asarray(centres), np.asarray(levels)
+    gain, floor = (float(c) for c in np.polyfit(centres, levels, 1))
+    # The least-squares line with both coefficients >= 0: a free fit that goes below 0 on one is refitted
+    # with it at 0. Clipping it instead kept the free fit's other coefficient, which on a raw of one
+    # brightness (a flat wall) extrapolates a noise-steep line to 0: a floor several times the noise.
+    if gain < 0:
+        gain, floor = 0.0, float(levels.mean())
+    elif floor < 0:
+        gain, floor = float(centres @ levels / (centres @ centres)), 0.0
+    if gain == 0.0 and floor <= 0.0:
         floor = float(np.quantile(variances, QUANTILE))
-    return gain, floor
+    return gain, max(floor, 0.0)
 
 
 def from_noise_profile(profile, mosaic: np.ndarray) -> NoiseEstimate:
