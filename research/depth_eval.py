@@ -1,8 +1,9 @@
 """Measure lfcl.depth.estimate_disparity with the HCI metrics (docs/depth.md has the table and commands).
 
 Scenes: ``antinous`` (the HCI light field in ../shared, a centre crop of --lenses, simulated into a
-lenslet raw by lfcl.sim) and ``planes`` (two textured fronto-parallel planes of known disparity
-over a background, rendered by lfcl.sim.planes). Noise model: the sensor's (what a DNG
+lenslet raw by lfcl.sim), ``planes`` (two textured fronto-parallel planes of known disparity
+over a background, rendered by lfcl.sim.planes) and the built-in scenes (charts, deadleaves, finetexture:
+the truth is the disparity of the frontmost plane at each lens, lfcl.sim's ``disparity``). Noise model: the sensor's (what a DNG
 NoiseProfile gives the pipeline). Not shipped in the wheel.
 
     .devvenv/bin/python research/depth_eval.py --scene antinous --lenses 128 --lux 0.5,2,12,50
@@ -22,6 +23,7 @@ from lfcl.depth import depth_scores, estimate_disparity, read_pfm
 from lfcl.noise.model import from_noise_profile
 from lfcl.sim.capture import simulate
 from lfcl.sim.planes import Plane
+from lfcl.sim.scenes import SCENES
 
 ROOT = Path(__file__).resolve().parents[1]
 ANTINOUS = ROOT.parent / "shared" / "realdata" / "hci_epinet" / "antinous"
@@ -64,12 +66,15 @@ def capture(scene: str, lenses: int, lux: float, seed: int):
         planes = planes_scene(lenses, lenses, seed)
         cap = simulate(planes=planes, lenses=(lenses, lenses), pitch=9, lux=lux, seed=seed)
         return cap, truth_of_planes(planes, lenses, lenses)
+    if scene in SCENES:  # a built-in scene: the disparity of its frontmost plane at each lens is the truth
+        cap = simulate(scene, lenses=(lenses, lenses), pitch=9, lux=lux, seed=seed)
+        return cap, cap.disparity.astype(np.float64)
     raise SystemExit(f"unknown scene {scene}")
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scene", default="antinous", choices=["antinous", "planes"])
+    ap.add_argument("--scene", default="antinous", choices=["antinous", "planes", *SCENES])
     ap.add_argument("--lenses", type=int, default=128)
     ap.add_argument("--lux", default="0.5,2,12,50")
     ap.add_argument("--seed", type=int, default=1)
