@@ -138,18 +138,25 @@ def fit_noise_model(means: np.ndarray, variances: np.ndarray, bins: int) -> tupl
             levels.append(np.quantile(variances[inside], QUANTILE))
     if len(centres) < 2:
         return 0.0, float(np.quantile(variances, QUANTILE))
-    centres, levels = np.asarray(centres), np.asarray(levels)
-    gain, floor = (float(c) for c in np.polyfit(centres, levels, 1))
-    # The least-squares line with both coefficients >= 0: a free fit that goes below 0 on one is refitted
-    # with it at 0. Clipping it instead kept the free fit's other coefficient, which on a raw of one
-    # brightness (a flat wall) extrapolates a noise-steep line to 0: a floor several times the noise.
-    if gain < 0:
-        gain, floor = 0.0, float(levels.mean())
-    elif floor < 0:
-        gain, floor = float(centres @ levels / (centres @ centres)), 0.0
+    gain, floor = _non_negative_line(np.asarray(centres, np.float64), np.asarray(levels, np.float64))
     if gain == 0.0 and floor <= 0.0:
         floor = float(np.quantile(variances, QUANTILE))
-    return gain, max(floor, 0.0)
+    return gain, floor
+
+
+def _non_negative_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """(gain, floor) of the least-squares line y = gain x + floor with both coefficients >= 0.
+
+    Where the free fit puts one below 0, the optimum lies on a face (gain = 0 or floor = 0): the better of the two.
+    Clipping the free fit instead kept its other coefficient, which on a raw of one brightness (a flat wall)
+    extrapolates a noise-steep line to 0: a floor several times the noise (docs/noise.md).
+    """
+    gain, floor = (float(c) for c in np.polyfit(x, y, 1))
+    if gain >= 0 and floor >= 0:
+        return gain, floor
+    xx = float(x @ x)
+    faces = [(0.0, max(float(y.mean()), 0.0)), (max(float(x @ y) / xx, 0.0) if xx > 0 else 0.0, 0.0)]
+    return min(faces, key=lambda line: float(np.sum((line[0] * x + line[1] - y) ** 2)))
 
 
 def from_noise_profile(profile, mosaic: np.ndarray) -> NoiseEstimate:
