@@ -8,10 +8,16 @@ Two tables:
 1. ``truth``: lfcl.evaluation.evaluate.truth_noise (the raw noise estimate run on the truth's noise-free mosaic,
    over the sensor's sigma) for every capture of `lfcl bench matrix` (held-out seed 7, 48x48 lenses) at each
    light level. The rendered scenes' truths are noise-free; the Lytro frame was decoded from a real camera.
-2. ``control``: the rendered ``antinous`` light field with camera-like grain baked into its truth (independent
-   per view, spatially correlated over ~1 pixel, multiplicative; its amplitude set so that truth_noise reads
-   what it reads on the Lytro frame at 12 lux), simulated at 2, 12 and 50 lux. Each method's gain over Malvar
-   is scored twice: against the grainy truth (what the matrix scores) and against the clean one.
+2. ``views``: how the truth's fine detail relates from view to view, for the real light fields and the control's
+   truth: the correlation of the high-pass (a 3x3 Laplacian) of the centre view with its neighbour (4, 5) and with
+   the corner view (0, 0), and the mean image's high-pass over the centre view's. A scene off the focal plane
+   shifts its texture from view to view (low neighbour correlation) and blurs it in the mean image (a small
+   share); grain shared by neighbouring views (a decoder that interpolates between them) correlates them.
+3. ``control``: the rendered ``antinous`` light field with camera-like grain baked into its truth (multiplicative,
+   ~1 pixel wide in (s, t), shared by neighbouring views like the Lytro frame's: a Gaussian of 0.6 views in
+   (u, v); its amplitude set so that truth_noise reads what it reads on the Lytro frame at 12 lux), simulated at
+   2, 12 and 50 lux. Each method's gain over Malvar is scored twice: against the grainy truth (what the matrix
+   scores) and against the clean one.
 """
 
 from __future__ import annotations
@@ -45,13 +51,52 @@ def truth_table(shared: Path, lenses: int) -> list[dict]:
     return rows
 
 
+#: The control's grain: its width in (s, t) pixels and in (u, v) views (0.6: neighbouring views correlate ~0.5).
+GRAIN_PIXELS, GRAIN_VIEWS = 0.7, 0.6
+
+
 def grainy(clean: np.ndarray, amplitude: float, seed: int = 123) -> np.ndarray:
-    """``clean`` [S, T, U, V, 3] times (1 + grain): the grain independent per view, ~1 pixel wide in (s, t), the same
-    in the three colours, its rms ``amplitude``."""
+    """``clean`` [S, T, U, V, 3] times (1 + grain): the grain ~1 pixel wide in (s, t), shared by neighbouring views,
+    the same in the three colours, its rms ``amplitude``."""
     grain = np.random.default_rng(seed).standard_normal(clean.shape[:4]).astype(np.float32)
-    grain = scipy.ndimage.gaussian_filter(grain, (0.7, 0.7, 0, 0))
+    grain = scipy.ndimage.gaussian_filter(grain, (GRAIN_PIXELS, GRAIN_PIXELS, GRAIN_VIEWS, GRAIN_VIEWS))
     grain *= amplitude / grain.std()
     return np.clip(clean * (1 + grain[..., None]), 0, None).astype(np.float32)
+
+
+HIGH_PASS = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float64)
+
+
+def view_structure(lightfield: np.ndarray) -> dict:
+    """The high-pass correlations of the centre view with its neighbour and with the corner view, and the mean
+    image's high-pass rms over the centre view's (grey, [S, T, U, V, 3] input)."""
+    grey = np.asarray(lightfield, np.float64).mean(axis=-1)
+    U, V = grey.shape[2:]
+    u0, v0 = U // 2, V // 2
+
+    def high(image):
+        return scipy.ndimage.convolve(image, HIGH_PASS)[1:-1, 1:-1].ravel()
+
+    centre = high(grey[:, :, u0, v0])
+    return {"neighbour_correlation": float(np.corrcoef(centre, high(grey[:, :, u0, v0 + 1]))[0, 1]),
+            "corner_correlation": float(np.corrcoef(centre, high(grey[:, :, 0, 0]))[0, 1]),
+            "mean_image_share": float(high(grey.mean(axis=(2, 3))).std() / centre.std())}
+
+
+def views_table(shared: Path, lenses: int, control_truth: np.ndarray) -> list[dict]:
+    from lfcl.bench.matrix import real_lightfields
+    from lfcl.sim.lightfield import load_lightfield
+
+    rows = []
+    fields = {label: load_lightfield(path, (lenses, lenses)) for label, path in real_lightfields(shared).items()}
+    fields["control (antinous + grain)"] = control_truth
+    for label, field in fields.items():
+        row = {"light field": label, **view_structure(field)}
+        rows.append(row)
+        print(f"views  {label:28s} high-pass correlation with the neighbour {row['neighbour_correlation']:+.2f}, "
+              f"with the corner {row['corner_correlation']:+.2f}; mean image / centre view {row['mean_image_share']:.2f}",
+              flush=True)
+    return rows
 
 
 def matched_amplitude(clean: np.ndarray, target: float, lux: float = 12) -> float:
@@ -73,6 +118,7 @@ def control(shared: Path, lenses: int, target: float) -> dict:
     clean = load_lightfield(shared / "realdata" / "hci_epinet" / "antinous", (lenses, lenses)).astype(np.float32)
     amplitude = matched_amplitude(clean, target)
     noisy = grainy(clean, amplitude)
+    views = views_table(shared, lenses, noisy)
     rows = []
     for lux in CONTROL_LUX:
         sim = simulate(lightfield=noisy, lux=lux, seed=7)
@@ -97,7 +143,8 @@ def control(shared: Path, lenses: int, target: float) -> dict:
                 print(f"control {lux:3g} lux ({ratio:.2f}x) {noise:7s} {method:9s} gain over Malvar against the "
                       f"grainy truth {row['grainy_centre']:+.2f} / {row['grainy_mean']:+.2f}, against the clean "
                       f"truth {row['clean_centre']:+.2f} / {row['clean_mean']:+.2f} (centre / mean image)", flush=True)
-    return {"amplitude": amplitude, "target_truth_noise_at_12_lux": target, "rows": rows}
+    return {"amplitude": amplitude, "target_truth_noise_at_12_lux": target, "grain_pixels": GRAIN_PIXELS,
+            "grain_views": GRAIN_VIEWS, "views": views, "rows": rows}
 
 
 def main(argv=None):
