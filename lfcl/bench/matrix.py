@@ -95,9 +95,10 @@ def format_rows(rows: list[dict]) -> str:
              "net lenses | truth's own noise |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(rows, key=worst):
         net = "-" if r["net"] is None else str(r["net"])
+        own = "-" if r["truth_noise"] is None else f"{r['truth_noise']:.2f}x"
         lines.append(f"| {r['capture']} | {r['lux']:g} | {r['noise']} | {r['method']} | {r['centre_gain']:+.2f} | "
                      f"{r['mean_gain']:+.2f} "
-                     f"| {r['centre']:.2f} | {r['mean']:.2f} | {r['seconds']:.2f} | {net} | {r['truth_noise']:.2f}x |")
+                     f"| {r['centre']:.2f} | {r['mean']:.2f} | {r['seconds']:.2f} | {net} | {own} |")
     if rows:
         low = min(rows, key=worst)
         lines.append("")
