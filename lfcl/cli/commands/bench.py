@@ -201,7 +201,11 @@ def stress_command(lenses, only, with_reference, as_json, device):
 @device_option
 @user_errors
 def matrix_command(scenes, shared, lux_text, methods, lenses, seed, noise_text, as_json, device):
-    """Every scene and real light field x light level x method: PSNR against Malvar, the worst cell first."""
+    """Every scene and real light field x light level x method: PSNR against Malvar, the worst cell first.
+
+    Each row also gives how noisy its ground truth is itself, over the sensor's noise (the Lytro frame's truth
+    carries a real camera's noise; docs/auto.md, "A truth with noise of its own").
+    """
     from ...bench import matrix
     from ...evaluation.evaluate import check_methods
     from ...sim.scenes import SCENES, check_scene
