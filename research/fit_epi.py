@@ -302,14 +302,27 @@ def run_profile(args):
     return times
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("mode", choices=("trace", "fit", "table", "format", "profile"))
-    parser.add_argument("inputs", nargs="*", help="fit / format: the trace / table JSON files")
+def add_capture_arguments(parser):
+    """The captures a research script runs on: --scenes, --seeds, --lux (comma lists), --lenses."""
     parser.add_argument("--scenes", default="charts,deadleaves,finetexture")
     parser.add_argument("--seeds", default="1,2")
     parser.add_argument("--lux", default="0.5,2,12,50")
     parser.add_argument("--lenses", type=int, default=48)
+
+
+def parse_capture_arguments(args):
+    """The lists of :func:`add_capture_arguments`, parsed in place."""
+    args.scenes = args.scenes.split(",")
+    args.seeds = [int(s) for s in args.seeds.split(",")]
+    args.lux = [float(v) for v in args.lux.split(",")]
+    return args
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("mode", choices=("trace", "fit", "table", "format", "profile"))
+    parser.add_argument("inputs", nargs="*", help="fit / format: the trace / table JSON files")
+    add_capture_arguments(parser)
     parser.add_argument("--c", default="0.3", help="lam / sigma values (trace)")
     parser.add_argument("--f", default="1", help="lam_fb / lam values (trace)")
     parser.add_argument("--xc", default="0", help="lam_xc / lam values (trace): the cross-channel block, 0 for none")
@@ -322,10 +335,7 @@ def main():
     parser.add_argument("--real", action="store_true", help="table: also the light fields antinous and 2067")
     parser.add_argument("--methods", default=",".join((*OTHERS, "admm-epi")))
     parser.add_argument("-o", "--output")
-    args = parser.parse_args()
-    args.scenes = args.scenes.split(",")
-    args.seeds = [int(s) for s in args.seeds.split(",")]
-    args.lux = [float(v) for v in args.lux.split(",")]
+    args = parse_capture_arguments(parser.parse_args())
     args.c, args.f, args.xc, args.rho = ([float(v) for v in getattr(args, k).split(",")] for k in ("c", "f", "xc", "rho"))
     args.cg = [int(v) for v in args.cg.split(",")]
     args.starts, args.depth, args.methods = args.starts.split(","), args.depth.split(","), args.methods.split(",")

@@ -19,7 +19,9 @@ import math
 import time
 
 import numpy as np
-from fit_epi import REAL, capture  # the same captures as admm-epi's fit and table (research/fit_epi.py)
+
+# the same captures as admm-epi's fit and table (research/fit_epi.py)
+from fit_epi import REAL, add_capture_arguments, capture, parse_capture_arguments
 
 import lfcl.noise.epipolar as epipolar
 import lfcl.noise.model as model
@@ -65,16 +67,11 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("mode", choices=("sweep", "fit"))
     parser.add_argument("inputs", nargs="*", help="fit: sweep JSON files")
-    parser.add_argument("--scenes", default="charts,deadleaves,finetexture")
-    parser.add_argument("--seeds", default="1,2")
-    parser.add_argument("--lux", default="0.5,2,12,50")
-    parser.add_argument("--lenses", type=int, default=48)
+    add_capture_arguments(parser)
     parser.add_argument("--real", action="store_true", help="also the light fields antinous and 2067 (held out)")
     parser.add_argument("--grid", choices=("all", "shipped", "before"), default="all")
     parser.add_argument("-o", "--output")
-    args = parser.parse_args()
-    args.scenes, args.seeds = args.scenes.split(","), [int(s) for s in args.seeds.split(",")]
-    args.lux = [float(v) for v in args.lux.split(",")]
+    args = parse_capture_arguments(parser.parse_args())
     if args.mode == "fit":
         rows = []
         for path in args.inputs:
