@@ -212,6 +212,69 @@ def run_fit(args):
     return fitted
 
 
+def pick_capped(trace: list[dict], most: int, change: float | None) -> dict:
+    """The iteration admm-epi stops at with at most ``most`` iterations and (``change``) the change rule."""
+    capped = trace[:most]
+    if change is not None:
+        hit = [row for row in capped if row["iteration"] > 1 and row["rms_change_sigma"] <= change]
+        if hit:
+            return hit[0]
+    return capped[-1]
+
+
+def run_fast(args):
+    """Per light level: the cheapest rule (start, c, rho, CG steps, at most K iterations, change rule) that keeps
+    the shipped rule's scores on the traced training captures, the cost of a run being its iterations times the
+    cost of one (``--iteration-ms`` outside CG plus ``--cg-step-ms`` per CG step, from ``profile``).
+
+    Keeping the scores: mean centre-view gain over Malvar at least the shipped rule's, worst capture's at least
+    the shipped worst less 0.1 dB, mean image's mean gain at least the shipped one's and its worst at least the
+    shipped worst less 0.1 dB. The shipped rule (the schedule's row nearest the level's median sigma) must be among
+    the traces."""
+    results = []
+    for path in args.inputs:
+        with open(path) as fh:
+            results += json.load(fh)["results"]
+    fitted = []
+    for lux in sorted({r["lux"] for r in results}):
+        at = [r for r in results if r["lux"] == lux]
+        sigma = float(np.median([r["sigma"] for r in at]))
+        ship = min(EPI_SCHEDULE, key=lambda row: abs(np.log(row.sigma / sigma)))
+        groups: dict = {}
+        for r in at:
+            key = (r["start"], r["c"], r["rho"], r["cg_steps"])
+            groups.setdefault(key, []).append(r)
+        rules = []
+        for (start, c, rho, cg), runs in groups.items():
+            for most, change in itertools.product((4, 6, 8, 10, 12, 15, 20, 25), (None, 0.02, 0.05, 0.1)):
+                picks = [pick_capped(r["trace"], most, change) for r in runs]
+                centre = [p["psnr_center"] - r["malvar"]["psnr_center"] for p, r in zip(picks, runs)]
+                mean = [p["psnr_mean"] - r["malvar"]["psnr_mean"] for p, r in zip(picks, runs)]
+                iterations = float(np.mean([p["iteration"] for p in picks]))
+                rules.append({"start": start, "c": c, "rho": rho, "cg_steps": cg, "most": most, "change": change,
+                              "captures": len(runs), "iterations": iterations,
+                              "cost": iterations * (args.iteration_ms + cg * args.cg_step_ms) / 1e3,
+                              "mean_centre": float(np.mean(centre)), "worst_centre": min(centre),
+                              "mean_mean": float(np.mean(mean)), "worst_mean": min(mean)})
+        shipped = [x for x in rules if (x["start"], x["rho"], x["cg_steps"], x["most"]) == (ship.start, 1.0, 5, ship.iterations)
+                   and x["c"] == ship.lam_per_sigma and x["change"] == ship.change_per_sigma]
+        if not shipped:
+            raise SystemExit(f"lux {lux:g}: no traces of the shipped rule {ship} (run them, see --shipped)")
+        base = shipped[0]
+        n = base["captures"]
+        keep = [x for x in rules if x["captures"] == n and x["mean_centre"] >= base["mean_centre"]
+                and x["worst_centre"] >= base["worst_centre"] - 0.1 and x["mean_mean"] >= base["mean_mean"]
+                and x["worst_mean"] >= base["worst_mean"] - 0.1]
+        keep.sort(key=lambda x: x["cost"])
+        print(f"lux {lux:g} (median sigma {sigma:.3e}, {n} captures): shipped "
+              + json.dumps({k: (round(v, 3) if isinstance(v, float) else v) for k, v in base.items()}))
+        for rule in keep[:args.top]:
+            print(f"   {rule['cost'] / base['cost']:.2f}x the time: "
+                  + json.dumps({k: (round(v, 3) if isinstance(v, float) else v) for k, v in rule.items()}))
+        fitted.append({"lux": lux, "sigma": sigma, "shipped": base, "cheapest": keep[:args.top]})
+    return fitted
+
+
 def run_table(args):
     rows = []
     scenes = [(s, seed) for s in args.scenes for seed in args.seeds] + \
@@ -320,7 +383,7 @@ def parse_capture_arguments(args):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("mode", choices=("trace", "fit", "table", "format", "profile"))
+    parser.add_argument("mode", choices=("trace", "fit", "fast", "table", "format", "profile"))
     parser.add_argument("inputs", nargs="*", help="fit / format: the trace / table JSON files")
     add_capture_arguments(parser)
     parser.add_argument("--c", default="0.3", help="lam / sigma values (trace)")
@@ -334,6 +397,8 @@ def main():
     parser.add_argument("--top", type=int, default=8)
     parser.add_argument("--real", action="store_true", help="table: also the light fields antinous and 2067")
     parser.add_argument("--methods", default=",".join((*OTHERS, "admm-epi")))
+    parser.add_argument("--iteration-ms", type=float, default=53.0, help="fast: one iteration outside its CG steps")
+    parser.add_argument("--cg-step-ms", type=float, default=29.7, help="fast: one CG step")
     parser.add_argument("-o", "--output")
     args = parse_capture_arguments(parser.parse_args())
     args.c, args.f, args.xc, args.rho = ([float(v) for v in getattr(args, k).split(",")] for k in ("c", "f", "xc", "rho"))
@@ -341,6 +406,9 @@ def main():
     args.starts, args.depth, args.methods = args.starts.split(","), args.depth.split(","), args.methods.split(",")
     if args.mode == "trace":
         payload = {"args": dict(vars(args)), "results": run_trace(args)}
+    elif args.mode == "fast":
+        payload = {"fitted": run_fast(args), "schedule": [dataclasses.asdict(s) for s in EPI_SCHEDULE],
+                   "cost_ms": {"iteration": args.iteration_ms, "cg_step": args.cg_step_ms}}
     elif args.mode == "fit":
         payload = {"fitted": run_fit(args), "schedule": [dataclasses.asdict(s) for s in EPI_SCHEDULE]}
     elif args.mode == "profile":

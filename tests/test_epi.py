@@ -17,6 +17,7 @@ from lfcl.ops.epi import (
     epi_gradient_np,
     epi_gram_np,
     epi_matrix_np,
+    epi_mixed_gradient_np,
     keys_weights_np,
 )
 from lfcl.ops.gradient import gradient_np
@@ -141,6 +142,26 @@ def test_device_matches_numpy(runtime, rng, geometry):
     base = rng.standard_normal(x.shape).astype(np.float32)
     total = op.adjoint(runtime.to_device(z), out=runtime.to_device(base), accumulate=True).get()
     np.testing.assert_allclose(total, base + epi_adjoint_np(z64, disparity, (U, V), matrix=M), atol=2e-5)
+    if C == 3:  # the colour mix of the normal operator
+        np.testing.assert_allclose(op.forward(runtime.to_device(x), mixed=True).get(),
+                                   epi_mixed_gradient_np(x64, disparity, (U, V), matrix=M), atol=1e-5)
+    else:
+        with pytest.raises(ValueError, match="3 channels"):
+            op.forward(runtime.to_device(x), mixed=True)
+
+
+def test_mixed_gradient_is_the_epi_and_cross_blocks_gram(rng):
+    """D^T (I + C^T C) D x = D^T D x + (D C)^T (D C) x: what the solver's normal operator relies on."""
+    from lfcl.solvers.epi import epi_cross_adjoint_np, epi_cross_gradient_np
+
+    S, T, U, V = 4, 5, 9, 9
+    x = rng.standard_normal((3, S * U, T * V))
+    disparity, confidence = maps(rng, S, T)
+    M = epi_matrix_np(disparity, (U, V), confidence)
+    got = epi_adjoint_np(epi_mixed_gradient_np(x, disparity, (U, V), matrix=M), disparity, (U, V), matrix=M)
+    expected = epi_adjoint_np(epi_gradient_np(x, disparity, (U, V), matrix=M), disparity, (U, V), matrix=M) + \
+        epi_cross_adjoint_np(epi_cross_gradient_np(x, disparity, (U, V), matrix=M), disparity, (U, V), matrix=M)
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12)
 
 
 def test_adjoint_dot_test(runtime, rng):
@@ -230,6 +251,48 @@ def test_solver_matches_the_float64_reference(runtime, rng, pattern, lam_fb):
     got = solver.solve(runtime.to_device(b), runtime.to_device(x0), params, prior, lens_weights=weights)
     assert solver.cross is None and len(solver.blocks) == (2 if lam_fb else 1)  # lam_xc = 0: no cross block
     assert_matches_the_reference(got, expected, iterations=8)
+
+
+@pytest.mark.parametrize("lam_xc, lam_fb", [(0.0, 0.0), (0.015, 0.02)])
+def test_carried_right_hand_side_and_residual_are_the_ones_they_stand_for(runtime, rng, lam_xc, lam_fb):
+    """iterate carries rhs = A^T W b + rho K^T (z - u) and CG's first residual r = rhs - N x from one iteration
+    to the next (epi_first_rhs, epi_carry_rhs) instead of recomputing them: after a run both must equal their
+    definitions, computed in float64 by the twins from the solver's own z, u and x."""
+    from lfcl.ops.cfa import cfa_adjoint_np, cfa_sample_np
+    from lfcl.solvers.epi import EpiAdmmSolver, EpiPrior, epi_cross_adjoint_np, epi_cross_gradient_np
+    from lfcl.solvers.params import AdmmParams
+
+    S, T, U, V = 5, 4, 9, 9
+    b, x0, _ = plane_scene_mosaic(rng, S, T, U, V)
+    disparity, confidence = maps(rng, S, T, spread=1.0)
+    params = AdmmParams(lam=0.01, lam_xc=lam_xc, rho=0.7, max_iter=6, cg_steps=3, cg_tol=0.0)
+    weights = np.ones((U, V))
+    weights[4, 4] = 0.5
+    solver = EpiAdmmSolver(runtime, b.shape, "GRBG", (U, V))
+    got = solver.solve(runtime.to_device(b), runtime.to_device(x0), params, EpiPrior(disparity, confidence, lam_fb),
+                       lens_weights=weights)
+    assert len(solver.blocks) == 1 + (lam_xc > 0) + (lam_fb > 0)
+    x = got.x.get().astype(np.float64)
+    w = np.tile(weights, (S, T))
+
+    def adjoint(op, z):  # K_b^T z in float64, by the twins
+        if op is solver.cross:
+            return epi_cross_adjoint_np(z, solver.epi.maps[0], (U, V), solver.epi.maps[1])
+        return epi_adjoint_np(z, op.maps[0], (U, V), op.maps[1])
+
+    def forward(op, v):
+        if op is solver.cross:
+            return epi_cross_gradient_np(v, solver.epi.maps[0], (U, V), solver.epi.maps[1])
+        return epi_gradient_np(v, op.maps[0], (U, V), op.maps[1])
+
+    states = [(z.get().astype(np.float64), u.get().astype(np.float64)) for z, u in solver._states]
+    rhs = cfa_adjoint_np(w * b, "GRBG") + params.rho * sum(
+        adjoint(op, z - u) for (op, _), (z, u) in zip(solver.blocks, states))
+    normal_x = cfa_adjoint_np(w * cfa_sample_np(x, "GRBG"), "GRBG") + params.rho * sum(
+        adjoint(op, forward(op, x)) for op, _ in solver.blocks)
+    scale = np.linalg.norm(rhs)
+    assert np.linalg.norm(solver._rhs.get() - rhs) <= 1e-5 * scale
+    assert np.linalg.norm(solver._cg[0].get() - (rhs - normal_x)) <= 1e-5 * scale
 
 
 def test_reference_solves_the_problem_it_states(rng):

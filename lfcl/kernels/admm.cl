@@ -24,15 +24,6 @@
 // the host's table of them), so a pixel of weight 0 has neither data nor prior: its row of M is
 // zero and the solvers leave it unchanged. Without PRIOR_MASK `links` is unused.
 
-// The data-term weights of 16 columns of one row. `weight_runs` tabulates them for every lens
-// row u and column phase p = col0 % V (the host's lens weights w[u][v] repeated along the row):
-// weight_runs[(u * V + p) * 16 + k] = w[u][(p + k) % V], one aligned load per run instead of a
-// 16-lane gather (lfcl/solvers/admm.py weight_runs_np). w[u][v] itself is entry (u * V + v) * 16.
-inline float16 row_weights(__global const float *weight_runs, int row, int16 cols)
-{
-    return vload16((row % PITCH_U) * PITCH_V + cols.s0 % PITCH_V, weight_runs);
-}
-
 #if CROSS_CHANNEL
 // The Laplacian D^T D of plane c of x, at 16 lanes.
 inline float16 plane_laplacian(__global const float *x, int c, int row, int col0, int height, int width,

@@ -66,6 +66,15 @@ inline int16 lane_columns(int col0)
 }
 
 #ifdef PITCH_U
+// The data-term weights of 16 columns of one row. `weight_runs` tabulates them for every lens
+// row u and column phase p = col0 % V (the host's lens weights w[u][v] repeated along the row):
+// weight_runs[(u * V + p) * 16 + k] = w[u][(p + k) % V], one aligned load per run instead of a
+// 16-lane gather (lfcl/solvers/admm.py weight_runs_np). w[u][v] itself is entry (u * V + v) * 16.
+inline float16 row_weights(__global const float *weight_runs, int row, int16 cols)
+{
+    return vload16((row % PITCH_U) * PITCH_V + cols.s0 % PITCH_V, weight_runs);
+}
+
 // Lanes (all ones) that have a neighbour one step along dim d in direction dir (+1: next,
 // -1: previous): the Neumann boundary. Rows split as s*U + u, columns as t*V + v.
 inline int16 has_neighbour(int d, int dir, int row, int16 cols, int height, int width)

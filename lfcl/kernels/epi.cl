@@ -66,8 +66,20 @@ inline int any_nonzero(float16 v)
     return any(v != 0.0f);
 }
 
+// With `mix` (3 channels): the differences times I + C^T C, C the colour differences (R - G, B - G), so that
+// D^T (mixed D x) is D^T D x + (D C)^T (D C) x, the EPI and cross-channel blocks' normal operator in one
+// gather each way (lfcl/solvers/epi.py EpiAdmmSolver.normal; twin: lfcl/ops/epi.py epi_mixed_gradient_np).
+inline void colour_mix(float16 *g)
+{
+    const float16 r = g[0], gr = g[1], b = g[2];
+    g[0] = 2.0f * r - gr;
+    g[1] = 3.0f * gr - r - b;
+    g[2] = 2.0f * b - gr;
+}
+
 __kernel void epi_forward(__global const float *x, __global float *z, __global const float *rays,
-                          __global const int *offsets, const int height, const int width, const int channels)
+                          __global const int *offsets, const int height, const int width, const int channels,
+                          const int mix)
 {
     const int col0 = 16 * get_global_id(0), row = get_global_id(1);
     if (col0 >= width || row >= height) return;
@@ -92,6 +104,7 @@ __kernel void epi_forward(__global const float *x, __global float *z, __global c
             for (int c = 0; c < channels; ++c) acc[c] += weight * load_row(x + c * plane + next, col0, 0, width);
         }
         for (int c = 0; c < channels; ++c) acc[c] = w * (acc[c] - own[c]);
+        if (mix) colour_mix(acc);
     }
     for (int c = 0; c < channels; ++c) store_row(acc[c], z + c * plane + base, col0, width);
     // v-block: the neighbour (s, t - d, u, v + 1), interpolated along t
@@ -104,9 +117,9 @@ __kernel void epi_forward(__global const float *x, __global float *z, __global c
         for (int c = 0; c < channels; ++c)
             acc[c] += weight * load_row(x + c * plane + base, col0, m * PITCH_V + 1, width);
     }
-    for (int c = 0; c < channels; ++c)
-        store_row(select((float16)0.0f, w * (acc[c] - own[c]), has_next), z + (channels + c) * plane + base, col0,
-                  width);
+    for (int c = 0; c < channels; ++c) acc[c] = select((float16)0.0f, w * (acc[c] - own[c]), has_next);
+    if (mix) colour_mix(acc);
+    for (int c = 0; c < channels; ++c) store_row(acc[c], z + (channels + c) * plane + base, col0, width);
 }
 
 // x (+)= D^T z, or with `squared` x (+)= diag(D^T D) (one [H, W] plane; z is not read).
@@ -170,57 +183,93 @@ __kernel void epi_adjoint(__global const float *z, __global float *x, __global c
     for (int c = 0; c < n; ++c) store_row(acc[c], x + c * plane + base, col0, width);
 }
 
-// --- the x-update of the EPI ADMM (lfcl/solvers/epi.py): the weighted data term, per pixel ---
-// `weights` are the U x V data-term weights of one lens (repeating from lens to lens); `pattern` the
-// packed Bayer phase (lfcl.layout.packed_pattern). Global size: (W, H).
+// --- the x-update of the EPI ADMM (lfcl/solvers/epi.py): the weighted data term, on runs of 16 columns ---
+// `weight_runs` are the U x V data-term weights of one lens (repeating from lens to lens) as common.cl
+// row_weights reads them; `pattern` the packed Bayer phase (lfcl.layout.packed_pattern).
+// Global size: (ceil(W / 16), H).
 
-// out = rho out + A^T W A src  (out holding sum_b K_b^T K_b src)
-__kernel void epi_normal_finish(__global float *out, __global const float *src, __global const float *weights,
-                                const float rho, const int height, const int width, const int pattern)
+// The lanes' data-term weight in colour plane c: w where the lane's pixel measured c, else 0 (diag(A^T W A)).
+inline float16 data_weight(__global const float *weight_runs, int row, int16 cols, int pattern, int c)
 {
-    const int col = get_global_id(0), row = get_global_id(1);
-    if (col >= width || row >= height) return;
-    const size_t plane = (size_t)height * width, i = (size_t)row * width + col;
-    const int own = bayer_colour(row, col, pattern);
-    const float w = weights[(row % PITCH_U) * PITCH_V + col % PITCH_V];
-    for (int c = 0; c < 3; ++c)
-        out[c * plane + i] = rho * out[c * plane + i] + (c == own ? w * src[c * plane + i] : 0.0f);
+    return select((float16)0.0f, row_weights(weight_runs, row, cols), measured_lanes(row, cols, pattern, c));
 }
 
-// out = rho out + A^T W b  (out holding sum_b K_b^T (z_b - u_b))
-__kernel void epi_rhs_finish(__global float *out, __global const float *b, __global const float *weights,
-                             const float rho, const int height, const int width, const int pattern)
+#define RUN_PROLOGUE                                                                                     \
+    const int col0 = 16 * get_global_id(0), row = get_global_id(1);                                    \
+    if (col0 >= width || row >= height) return;                                                        \
+    const size_t plane = (size_t)height * width, base = (size_t)row * width;                           \
+    const int16 cols = lane_columns(col0);
+
+// out = rho out + A^T W A src  (out holding sum_b K_b^T K_b src)
+__kernel void epi_normal_finish(__global float *out, __global const float *src, __global const float *weight_runs,
+                                const float rho, const int height, const int width, const int pattern)
 {
-    const int col = get_global_id(0), row = get_global_id(1);
-    if (col >= width || row >= height) return;
-    const size_t plane = (size_t)height * width, i = (size_t)row * width + col;
-    const int own = bayer_colour(row, col, pattern);
-    const float w = weights[(row % PITCH_U) * PITCH_V + col % PITCH_V];
-    for (int c = 0; c < 3; ++c)
-        out[c * plane + i] = rho * out[c * plane + i] + (c == own ? w * b[i] : 0.0f);
+    RUN_PROLOGUE
+    for (int c = 0; c < 3; ++c) {
+        const size_t at = c * plane + base;
+        store_row(rho * load_row(out + at, col0, 0, width)
+                  + data_weight(weight_runs, row, cols, pattern, c) * load_row(src + at, col0, 0, width),
+                  out + at, col0, width);
+    }
+}
+
+// The right-hand side and CG's first residual carried from one iteration to the next (lfcl/solvers/epi.py,
+// EpiAdmmSolver.iterate has the algebra): with kz = K^T z, rhs = A^T W b + rho K^T (z - u) and r = rhs - N x
+// (N = A^T W A + rho K^T K), after the z/u step (dual = K^T (z' - z), u' = u + K x - z'):
+//   rhs' = r + A^T W A x + rho (kz + 2 dual),   r' = rhs' - N x = rhs' - rhs + r,   kz' = kz + dual.
+__kernel void epi_carry_rhs(__global float *rhs, __global float *r, __global float *kz, __global const float *dual,
+                            __global const float *x, __global const float *weight_runs, const float rho,
+                            const int height, const int width, const int pattern)
+{
+    RUN_PROLOGUE
+    for (int c = 0; c < 3; ++c) {
+        const size_t at = c * plane + base;
+        const float16 d = load_row(dual + at, col0, 0, width), ri = load_row(r + at, col0, 0, width);
+        const float16 kz_next = load_row(kz + at, col0, 0, width) + d;
+        const float16 rhs_next = ri + data_weight(weight_runs, row, cols, pattern, c) * load_row(x + at, col0, 0, width)
+                               + rho * (kz_next + d);
+        store_row(rhs_next - load_row(rhs + at, col0, 0, width) + ri, r + at, col0, width);
+        store_row(rhs_next, rhs + at, col0, width);
+        store_row(kz_next, kz + at, col0, width);
+    }
+}
+
+// The first iteration's (z = K x, u = 0, kz = K^T z): rhs = A^T W b + rho kz, r = A^T W (b - A x).
+__kernel void epi_first_rhs(__global float *rhs, __global float *r, __global const float *kz,
+                            __global const float *x, __global const float *b, __global const float *weight_runs,
+                            const float rho, const int height, const int width, const int pattern)
+{
+    RUN_PROLOGUE
+    const float16 raw = load_row(b + base, col0, 0, width);
+    for (int c = 0; c < 3; ++c) {
+        const size_t at = c * plane + base;
+        const float16 w = data_weight(weight_runs, row, cols, pattern, c);
+        store_row(w * raw + rho * load_row(kz + at, col0, 0, width), rhs + at, col0, width);
+        store_row(w * (raw - load_row(x + at, col0, 0, width)), r + at, col0, width);
+    }
 }
 
 // out = r / diag(A^T W A + rho K^T K), 0 where the diagonal is 0. kdiag = diag(K^T K) [H, W] of the blocks
 // that treat the colours alike; with `cross`, the cross-channel block (D C)^T (D C) = C^T C (x) D^T D adds
 // its diagonal: that of C^T C, (1, 2, 1) for (R, G, B), times xdiag = diag(D^T D) [H, W].
 __kernel void epi_jacobi(__global const float *r, __global float *out, __global const float *kdiag,
-                         __global const float *xdiag, const int cross, __global const float *weights,
+                         __global const float *xdiag, const int cross, __global const float *weight_runs,
                          const float rho, const int height, const int width, const int pattern)
 {
-    const int col = get_global_id(0), row = get_global_id(1);
-    if (col >= width || row >= height) return;
-    const size_t plane = (size_t)height * width, i = (size_t)row * width + col;
-    const int own = bayer_colour(row, col, pattern);
-    const float w = weights[(row % PITCH_U) * PITCH_V + col % PITCH_V];
+    RUN_PROLOGUE
+    const float16 own = load_row(kdiag + base, col0, 0, width);
+    const float16 other = cross ? load_row(xdiag + base, col0, 0, width) : (float16)0.0f;
     for (int c = 0; c < 3; ++c) {
-        const float prior = kdiag[i] + (cross ? (c == 1 ? 2.0f : 1.0f) * xdiag[i] : 0.0f);
-        const float diagonal = (c == own ? w : 0.0f) + rho * prior;
-        out[c * plane + i] = diagonal > 0.0f ? r[c * plane + i] / diagonal : 0.0f;
+        const size_t at = c * plane + base;
+        const float16 diagonal = data_weight(weight_runs, row, cols, pattern, c)
+                               + rho * (own + (c == 1 ? 2.0f : 1.0f) * other);
+        store_row(select((float16)0.0f, load_row(r + at, col0, 0, width) / diagonal, diagonal > 0.0f), out + at,
+                  col0, width);
     }
 }
 
 // partial[row] = sum over the row of w (x[colour] - b)^2 (Kahan-compensated). Global size: (H).
-__kernel void epi_misfit_rows(__global const float *x, __global const float *b, __global const float *weights,
+__kernel void epi_misfit_rows(__global const float *x, __global const float *b, __global const float *weight_runs,
                               __global float *partial, const int height, const int width, const int pattern)
 {
     const int row = get_global_id(0);
@@ -229,7 +278,7 @@ __kernel void epi_misfit_rows(__global const float *x, __global const float *b, 
     float sum = 0.0f, err = 0.0f;
     for (int col = 0; col < width; ++col) {
         const float r = x[bayer_colour(row, col, pattern) * plane + base + col] - b[base + col];
-        const float term = weights[(row % PITCH_U) * PITCH_V + col % PITCH_V] * r * r - err;
+        const float term = weight_runs[((row % PITCH_U) * PITCH_V + col % PITCH_V) * 16] * r * r - err;
         const float next = sum + term;
         err = (next - sum) - term;
         sum = next;

@@ -48,6 +48,7 @@ import scipy.sparse
 
 from ..device import grid_defines
 from . import check_device_array, output
+from .crosschannel import COLOUR_GRAM
 
 #: The largest |disparity| (lenses per view step) the operator takes.
 MAX_DISPARITY = 16.0
@@ -164,6 +165,20 @@ def epi_adjoint_np(z, disparity, pitch, confidence=None, matrix=None) -> np.ndar
     M = matrix if matrix is not None else epi_matrix_np(disparity, pitch, confidence)
     flat = z.transpose(1, 0, 2, 3).reshape(C, 2 * H * W)
     return (M.T @ flat.T).T.reshape(C, H, W).astype(np.result_type(z.dtype, np.float32), copy=False)
+
+
+#: I + C^T C for the colour differences C = (R - G, B - G): the per-pixel mix of :func:`epi_mixed_gradient_np`.
+COLOUR_MIX = np.eye(3) + COLOUR_GRAM
+
+
+def epi_mixed_gradient_np(x, disparity, pitch, confidence=None, matrix=None) -> np.ndarray:
+    """(I + C^T C) D_epi x per pixel (``[3, H, W]`` -> ``[2, 3, H, W]``), C the colour differences (R - G, B - G):
+    ``D^T`` of it is ``D^T D x + (D C)^T (D C) x``, the EPI and cross-channel blocks' share of the normal
+    operator (the device's ``forward(..., mixed=True)``)."""
+    g = epi_gradient_np(x, disparity, pitch, confidence, matrix)
+    if g.shape[1] != 3:
+        raise ValueError(f"the colour mix needs 3 channels, got {g.shape[1]}")
+    return np.einsum("ij,bjhw->bihw", COLOUR_MIX, g).astype(g.dtype, copy=False)
 
 
 def epi_gram_np(x, disparity, pitch, confidence=None) -> np.ndarray:
@@ -286,11 +301,14 @@ class EpiGradient:
             raise ValueError("EpiGradient: call set_maps(disparity, confidence) first")
         return self._rays.data, self._offsets.data, np.int32(self.height), np.int32(self.width)
 
-    def forward(self, x, out=None):
+    def forward(self, x, out=None, mixed: bool = False):
+        """D x; with ``mixed`` (3 channels) (I + C^T C) D x per pixel (:func:`epi_mixed_gradient_np`)."""
         check_device_array(x, self.planes_shape, "x")
+        if mixed and self.channels != 3:
+            raise ValueError(f"the colour mix needs 3 channels, got {self.channels}")
         out = output(self.runtime, out, self.gradient_shape)
         self.runtime.launch("epi", "epi_forward", self._grid, x.data, out.data, *self._args(),
-                            np.int32(self.channels), defines=self._defines)
+                            np.int32(self.channels), np.int32(bool(mixed)), defines=self._defines)
         return out
 
     def adjoint(self, z, out=None, accumulate: bool = False):

@@ -8,17 +8,21 @@ Shared by the aligned solver (lfcl/solvers/admm.py) and the resampled one
 from __future__ import annotations
 
 
-def preconditioned_cg(vec, red, apply, precondition, x, rhs, buffers, max_steps: int, tol: float) -> int:
+def preconditioned_cg(vec, red, apply, precondition, x, rhs, buffers, max_steps: int, tol: float,
+                      residual_ready: bool = False) -> int:
     """Solve ``apply(x) = rhs`` in place from the warm start ``x``; returns the steps taken.
 
     ``apply(src, out)`` and ``precondition(src, out)`` write into ``out``; ``vec`` and
     ``red`` are the VectorOps and Reductions of the runtime; ``buffers`` four arrays
     shaped like ``x`` (r, P r, p, q). Stops when ``||r|| <= tol ||rhs||`` or after
     ``max_steps``. One host round trip per reduction point: (r.Pr, |r|^2) together.
+    With ``residual_ready`` the caller has put ``rhs - M x`` in r (a caller that carries it
+    saves the product M x); afterwards r holds the final residual (CG's recurrence).
     """
     r, pz, p, q = buffers
-    apply(x, q)
-    vec.axpby(1.0, rhs, -1.0, q, r)  # r = rhs - M x
+    if not residual_ready:
+        apply(x, q)
+        vec.axpby(1.0, rhs, -1.0, q, r)  # r = rhs - M x
     precondition(r, pz)
     vec.copy(pz, p)
     rz, r2, rhs2 = red.many(("dot", r, pz), ("norm2", r), ("norm2", rhs))

@@ -47,6 +47,7 @@ from ..ops.crosschannel import COLOUR_GRAM, ColourDifferences, colour_difference
 from ..ops.epi import EpiGradient, check_maps, epi_adjoint_np, epi_diagonal_np, epi_gradient_np, epi_matrix_np
 from ..ops.linalg import VectorOps, elementwise_size
 from ..ops.reduce import Reductions
+from .admm import weight_runs_np
 from .cg import preconditioned_cg
 from .params import AdmmParams, AdmmResult, BandedResult, IterationRecord, stop_reason
 from .reference import admm_operators
@@ -181,9 +182,9 @@ def epi_solver_bytes(sensor_shape, fallback: bool, cross_channel: bool = False) 
     H, W = (int(n) for n in sensor_shape)
     planes = 3 * H * W
     blocks = 2 if fallback else 1
-    # planes: the start, x, previous x, rhs, 4 CG vectors; K x scratch (2 planes); z, u per block (2 x 2 planes);
-    # per block the rays (d, w per sample); the mosaic and diag(K^T K)
-    floats = 8 * planes + 2 * planes + blocks * (4 * planes + 2 * H * W) + 2 * H * W
+    # planes: the start, x, previous x, rhs, K^T z, 4 CG vectors; K x scratch (2 planes); z, u per block (2 x 2
+    # planes); per block the rays (d, w per sample); the mosaic and diag(K^T K)
+    floats = 9 * planes + 2 * planes + blocks * (4 * planes + 2 * H * W) + 2 * H * W
     if cross_channel:  # z, u and the K x scratch ([2, 2, H, W] each) and diag(D^T D) [H, W]
         floats += 3 * 4 * H * W + H * W
     return 4 * floats
@@ -260,6 +261,7 @@ class EpiAdmmSolver:
         self.vectors = VectorOps(runtime)
         self.reduce = Reductions(runtime)
         self._rhs, self._x_prev = runtime.empty(self.planes_shape), runtime.empty(self.planes_shape)
+        self._kz = runtime.empty(self.planes_shape)  # K^T z, carried (iterate)
         self._cg = [runtime.empty(self.planes_shape) for _ in range(4)]
         # K_b x, z - u, dz of the EPI and fall-back blocks (one after the other); the cross block has its own
         self._scratch = runtime.empty(self.epi.gradient_shape)
@@ -270,7 +272,8 @@ class EpiAdmmSolver:
         self._chunks = -(-n // 16)  # the z/u step runs this many chunks for every block (past its end: sums of 0)
         self._primal_part, self._l1_part = runtime.empty(self._chunks), runtime.empty(self._chunks)
         self._misfit_rows = runtime.empty(self.height)
-        self._weights = runtime.to_device(np.ones(self.U * self.V, np.float32))
+        self._weight_runs = runtime.to_device(weight_runs_np(np.ones((self.U, self.V), np.float32)))
+        self._runs = ((self.width + 15) // 16, self.height)  # the pixelwise kernels: 16 columns a work-item
         self.blocks: list[tuple] = []  # (operator, lam) per prior block
         self._states: list = []  # (z, u) of each of self.blocks
         self._scratches: list = []  # the scratch of each of self.blocks
@@ -278,7 +281,7 @@ class EpiAdmmSolver:
     def set_lens_weights(self, lens_weights=None):
         """Data-term weights [U, V] of every lens (None: ones); see AdmmSolver.set_lens_weights."""
         weights = lens_weights_or_ones(lens_weights, (self.U, self.V))
-        self._weights.set(np.ascontiguousarray(weights.ravel()))
+        self._weight_runs.set(weight_runs_np(weights))
 
     def prepare(self, params: AdmmParams, prior: EpiPrior, lens_weights=None):
         """Upload the maps and weights, build diag(K^T K) and the blocks (op, lam) for ``params``.
@@ -334,13 +337,19 @@ class EpiAdmmSolver:
         return op.adjoint(gradient, out, accumulate)
 
     def _pixelwise(self, kernel, *args):
-        self.runtime.launch("epi", kernel, (self.width, self.height), *args, defines=self._defines)
+        self.runtime.launch("epi", kernel, self._runs, *args, defines=self._defines)
 
     def normal(self, src, out, rho):
-        """out = (A^T W A + rho K^T K) src."""
-        for i, ((op, _), scratch) in enumerate(zip(self.blocks, self._scratches)):
-            self._adjoint(op, self._forward(op, src, scratch), out, accumulate=self._accumulate(i))
-        self._pixelwise("epi_normal_finish", out.data, src.data, self._weights.data, np.float32(rho),
+        """out = (A^T W A + rho K^T K) src; the EPI and cross blocks' share as D^T (I + C^T C) D src (one gather
+        each way: EpiGradient.forward's colour mix)."""
+        written = False
+        for op, _ in self.blocks:
+            if op is self.cross:
+                continue  # in the EPI block's mixed gradient
+            mixed = op is self.epi and self._has_cross
+            op.adjoint(op.forward(src, self._scratch, mixed=mixed), out, accumulate=written)
+            written = True
+        self._pixelwise("epi_normal_finish", out.data, src.data, self._weight_runs.data, np.float32(rho),
                         np.int32(self.height), np.int32(self.width), self._pattern)
         return out
 
@@ -348,24 +357,32 @@ class EpiAdmmSolver:
         """out = r / diag(A^T W A + rho K^T K)."""
         cross = self._has_cross
         self._pixelwise("epi_jacobi", r.data, out.data, self._kdiag.data, (self._xdiag if cross else self._kdiag).data,
-                        np.int32(cross), self._weights.data, np.float32(rho), np.int32(self.height),
+                        np.int32(cross), self._weight_runs.data, np.float32(rho), np.int32(self.height),
                         np.int32(self.width), self._pattern)
         return out
 
-    def right_hand_side(self, b, out, rho):
-        """out = A^T W b + rho K^T (z - u)."""
-        for i, ((op, _), (z, u), scratch) in enumerate(zip(self.blocks, self._states, self._scratches)):
-            self.vectors.axpby(1.0, z, -1.0, u, scratch)
+    def _each_block(self, x, step, out):
+        """Per block: K_b x into its scratch, ``step(i, scratch)``, then ``out`` (+)= K_b^T scratch (the blocks'
+        adjoints summed, the cross block's folded into the EPI block's: :meth:`_adjoint`)."""
+        for i, ((op, _), scratch) in enumerate(zip(self.blocks, self._scratches)):
+            if op is not self.cross:  # the cross block's K x is made from the EPI block's, before its step
+                self._forward(op, x, scratch)
+            if op is self.epi and self._has_cross:
+                self._forward(self.cross, x, self._cross_scratch)
+            step(i, scratch)
             self._adjoint(op, scratch, out, accumulate=self._accumulate(i))
-        self._pixelwise("epi_rhs_finish", out.data, b.data, self._weights.data, np.float32(rho),
-                        np.int32(self.height), np.int32(self.width), self._pattern)
-        return out
 
-    def start(self, x):
-        """z = K x, u = 0."""
-        for (op, _), (z, u), scratch in zip(self.blocks, self._states, self._scratches):
-            self.vectors.copy(self._forward(op, x, scratch), z)
+    def start(self, x, b, rho):
+        """z = K x, u = 0; the carried K^T z, right-hand side and CG residual (:meth:`iterate`)."""
+        def first(i, scratch):
+            z, u = self._states[i]
+            self.vectors.copy(scratch, z)
             self.vectors.zero(u)
+
+        self._each_block(x, first, self._kz)
+        self._pixelwise("epi_first_rhs", self._rhs.data, self._cg[0].data, self._kz.data, x.data, b.data,
+                        self._weight_runs.data, np.float32(rho), np.int32(self.height), np.int32(self.width),
+                        self._pattern)
 
     def solve(self, b, x0, params: AdmmParams, prior: EpiPrior, callback=None, lens_weights=None) -> AdmmResult:
         """Run ADMM on mosaic ``b`` [H, W] from ``x0`` [3, H, W] (float32 device arrays; x0 is not modified).
@@ -376,38 +393,46 @@ class EpiAdmmSolver:
         check_device_array(x0, self.planes_shape, "x0")
         self.prepare(params, prior, lens_weights)
         x = x0.copy()
-        self.start(x)
+        self.start(x, b, params.rho)
         history: list[IterationRecord] = []
         reason = self.iterate(b, x, params, history, callback=callback)
         return AdmmResult(x=x, history=history, stop_reason=reason)
 
     def iterate(self, b, x, params: AdmmParams, history: list, callback=None) -> str:
+        """ADMM iterations from :meth:`start` until a stop rule fires; returns its reason.
+
+        The right-hand side ``A^T W b + rho K^T (z - u)`` and CG's first residual ``rhs - N x`` are carried from
+        one iteration to the next instead of recomputed, so an iteration runs K once (the z/u step) and K^T once
+        (``K^T (z' - z)``, which the dual residual needs anyway) besides its CG steps: with ``kz = K^T z``,
+        ``u' = u + K x - z'`` and CG's final residual ``r = rhs - N x``, ``rho K^T K x = rhs - r - A^T W A x``
+        gives ``rhs' = r + A^T W A x + rho (kz + 2 K^T (z' - z))`` and ``r' = rhs' - rhs + r`` (epi_carry_rhs).
+        """
         rho, vec, red = params.rho, self.vectors, self.reduce
         n_z = sum(z.size for z, _ in self._states)
         size = elementwise_size(self._scratch.size)  # every block's step over all the chunks (see __init__)
+        residual, dual = self._cg[0], self._cg[1]  # CG's P r buffer is free until the next x-update
         while True:
             vec.copy(x, self._x_prev)
-            self.right_hand_side(b, self._rhs, rho)
             steps = preconditioned_cg(vec, red, lambda src, out: self.normal(src, out, rho),
                                       lambda src, out: self.precondition(src, out, rho), x, self._rhs, self._cg,
-                                      params.cg_steps, params.cg_tol)
-            dual = self._cg[0]  # CG's residual buffer is free until the next x-update
-            slot = 0
-            red.enqueue(slot, "diff_norm2", x, self._x_prev)
-            for i, ((op, lam), (z, u), scratch) in enumerate(zip(self.blocks, self._states, self._scratches)):
-                if op is not self.cross:  # the cross block's K x was made from the EPI block's, before its z/u step
-                    self._forward(op, x, scratch)
-                if op is self.epi and self._has_cross:
-                    self._forward(self.cross, x, self._cross_scratch)
+                                      params.cg_steps, params.cg_tol, residual_ready=True)
+            red.enqueue(0, "diff_norm2", x, self._x_prev)
+
+            def z_u_step(i, scratch):  # z, u, and scratch <- z' - z, with the sums of the residuals
+                (_, lam), (z, u) = self.blocks[i], self._states[i]
                 self.runtime.launch("epi", "epi_zu", size, scratch.data, z.data, u.data, self._primal_part.data,
                                     self._l1_part.data, np.float32(lam / rho), np.uint64(scratch.size),
                                     np.uint64(self._chunks), defines=self._defines)
-                red.enqueue(slot + 1, "sum", self._primal_part)
-                red.enqueue(slot + 2, "sum", self._l1_part)
-                slot += 2
-                self._adjoint(op, scratch, dual, accumulate=self._accumulate(i))  # K^T dz
+                red.enqueue(2 * i + 1, "sum", self._primal_part)
+                red.enqueue(2 * i + 2, "sum", self._l1_part)
+
+            self._each_block(x, z_u_step, dual)  # dual = K^T (z' - z)
+            slot = 2 * len(self.blocks)
             red.enqueue(slot + 1, "norm2", dual)
-            self.runtime.launch("epi", "epi_misfit_rows", (self.height,), x.data, b.data, self._weights.data,
+            self._pixelwise("epi_carry_rhs", self._rhs.data, residual.data, self._kz.data, dual.data, x.data,
+                            self._weight_runs.data, np.float32(rho), np.int32(self.height), np.int32(self.width),
+                            self._pattern)
+            self.runtime.launch("epi", "epi_misfit_rows", (self.height,), x.data, b.data, self._weight_runs.data,
                                 self._misfit_rows.data, np.int32(self.height), np.int32(self.width), self._pattern,
                                 defines=self._defines)
             red.enqueue(slot + 2, "sum", self._misfit_rows)
