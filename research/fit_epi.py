@@ -48,9 +48,32 @@ REAL = {"antinous": "../shared/realdata/hci_epinet/antinous", "lytro2067": "../s
 OTHERS = ("malvar", "linear4d", "admm-uv", "admm-uvst", "admm-uv-xc")
 
 
+PROCEDURAL = "procedural-"  # research/training_scenes.py's scene of that seed (linear4d's training family)
+
+
+def procedural_lightfield(seed: int, lenses: int) -> str:
+    """A .npy of the procedural training scene ``seed`` at ``lenses`` x ``lenses`` (rendered once, cached)."""
+    import pathlib
+    import tempfile
+
+    from training_scenes import training_planes
+
+    from lfcl.sim import render_planes
+
+    path = pathlib.Path(tempfile.gettempdir()) / "lfcl_procedural" / f"{lenses}_{seed}.npy"
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.save(path, render_planes(training_planes((lenses, lenses), seed, (9, 9)), (lenses, lenses), (9, 9)))
+    return str(path)
+
+
 def capture(scene, seed, lux, lenses):
+    """A simulated capture of a built-in scene, a real light field (REAL) or ``procedural-N`` (noise seed ``seed``)."""
     if scene in REAL:
         return simulated_capture(lenses, lux, seed, lightfield=REAL[scene])
+    if scene.startswith(PROCEDURAL):
+        return simulated_capture(lenses, lux, seed, lightfield=procedural_lightfield(int(scene[len(PROCEDURAL):]),
+                                                                                      lenses))
     return simulated_capture(lenses, lux, seed, scene)
 
 
@@ -74,7 +97,9 @@ def depth_for(kind, cap, noise, scene, seed, lenses) -> tuple[Depth, dict]:
     from lfcl.depth import badpix, estimate_disparity
     from lfcl.sim.scenes import render_disparity
 
-    gt = np.nan_to_num(render_disparity(scene, lenses, seed, cap.pitch))
+    if scene.startswith(PROCEDURAL) and kind == "truth":
+        raise SystemExit(f"{scene}: no scene disparity for --depth truth")
+    gt = None if scene.startswith(PROCEDURAL) else np.nan_to_num(render_disparity(scene, lenses, seed, cap.pitch))
     if kind == "truth":
         return Depth(gt, None), {"source": "truth", "seconds": 0.0}
     began = time.perf_counter()
@@ -83,6 +108,8 @@ def depth_for(kind, cap, noise, scene, seed, lenses) -> tuple[Depth, dict]:
     seconds = time.perf_counter() - began
     if kind == "trusted":  # the estimate with confidence 1 everywhere: no fall-back block
         est.confidence = np.ones_like(est.confidence)
+    if gt is None:
+        return Depth(est.disparity, est.confidence), {"source": kind, "seconds": seconds}
     return Depth(est.disparity, est.confidence), {
         "source": kind, "seconds": seconds, "badpix_0.1": float(badpix(est.disparity, gt, 0.1)),
         "badpix_0.1_confident": float(badpix(est.disparity[est.confidence >= 0.5], gt[est.confidence >= 0.5], 0.1))
