@@ -253,11 +253,12 @@ def test_solver_matches_the_float64_reference(runtime, rng, pattern, lam_fb):
     assert_matches_the_reference(got, expected, iterations=8)
 
 
-@pytest.mark.parametrize("lam_xc, lam_fb", [(0.0, 0.0), (0.015, 0.02)])
-def test_carried_right_hand_side_and_residual_are_the_ones_they_stand_for(runtime, rng, lam_xc, lam_fb):
+@pytest.mark.parametrize("lam_xc, lam_fb, iterations", [(0.0, 0.0, 6), (0.015, 0.02, 6), (0.015, 0.0, 47)])
+def test_carried_right_hand_side_and_residual_are_the_ones_they_stand_for(runtime, rng, lam_xc, lam_fb, iterations):
     """iterate carries rhs = A^T W b + rho K^T (z - u) and CG's first residual r = rhs - N x from one iteration
-    to the next (epi_first_rhs, epi_carry_rhs) instead of recomputing them: after a run both must equal their
-    definitions, computed in float64 by the twins from the solver's own z, u and x."""
+    to the next (epi_carry_rhs) instead of recomputing them, and recomputes them every EPI_REFRESH iterations: after
+    a run (short, or long enough to pass several refreshes) both must equal their definitions, computed in float64
+    by the twins from the solver's own z, u and x."""
     from lfcl.ops.cfa import cfa_adjoint_np, cfa_sample_np
     from lfcl.solvers.epi import EpiAdmmSolver, EpiPrior, epi_cross_adjoint_np, epi_cross_gradient_np
     from lfcl.solvers.params import AdmmParams
@@ -265,7 +266,7 @@ def test_carried_right_hand_side_and_residual_are_the_ones_they_stand_for(runtim
     S, T, U, V = 5, 4, 9, 9
     b, x0, _ = plane_scene_mosaic(rng, S, T, U, V)
     disparity, confidence = maps(rng, S, T, spread=1.0)
-    params = AdmmParams(lam=0.01, lam_xc=lam_xc, rho=0.7, max_iter=6, cg_steps=3, cg_tol=0.0)
+    params = AdmmParams(lam=0.01, lam_xc=lam_xc, rho=0.7, max_iter=iterations, cg_steps=3, cg_tol=0.0)
     weights = np.ones((U, V))
     weights[4, 4] = 0.5
     solver = EpiAdmmSolver(runtime, b.shape, "GRBG", (U, V))

@@ -234,18 +234,17 @@ __kernel void epi_carry_rhs(__global float *rhs, __global float *r, __global flo
     }
 }
 
-// The first iteration's (z = K x, u = 0, kz = K^T z): rhs = A^T W b + rho kz, r = A^T W (b - A x).
-__kernel void epi_first_rhs(__global float *rhs, __global float *r, __global const float *kz,
-                            __global const float *x, __global const float *b, __global const float *weight_runs,
-                            const float rho, const int height, const int width, const int pattern)
+// out = rho out + A^T W b  (out holding sum_b K_b^T (z_b - u_b)): the right-hand side from its definition
+// (EpiAdmmSolver.refresh).
+__kernel void epi_rhs_finish(__global float *out, __global const float *b, __global const float *weight_runs,
+                             const float rho, const int height, const int width, const int pattern)
 {
     RUN_PROLOGUE
     const float16 raw = load_row(b + base, col0, 0, width);
     for (int c = 0; c < 3; ++c) {
         const size_t at = c * plane + base;
-        const float16 w = data_weight(weight_runs, row, cols, pattern, c);
-        store_row(w * raw + rho * load_row(kz + at, col0, 0, width), rhs + at, col0, width);
-        store_row(w * (raw - load_row(x + at, col0, 0, width)), r + at, col0, width);
+        store_row(rho * load_row(out + at, col0, 0, width) + data_weight(weight_runs, row, cols, pattern, c) * raw,
+                  out + at, col0, width);
     }
 }
 

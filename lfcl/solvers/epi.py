@@ -241,6 +241,12 @@ class EpiCrossGradient:
         return self.epi.adjoint(self.colour.adjoint(z, self._buffer()), out, accumulate)
 
 
+#: Every this many iterations EpiAdmmSolver.iterate recomputes the vectors it carries (EpiAdmmSolver.refresh). The
+#: carry's float32 round-off grows with the iterations: on a 12x12-lens plane (5 CG steps, carried throughout)
+#: 6e-6 of |rhs| after 6 iterations, 1.6e-4 after 50 and 1.3e-3 after 200, by then as large as the residual itself.
+EPI_REFRESH = 10
+
+
 class EpiAdmmSolver:
     """ADMM with the EPI prior for one sensor size, Bayer phase and lens pitch (build once, solve many)."""
 
@@ -373,16 +379,28 @@ class EpiAdmmSolver:
             self._adjoint(op, scratch, out, accumulate=self._accumulate(i))
 
     def start(self, x, b, rho):
-        """z = K x, u = 0; the carried K^T z, right-hand side and CG residual (:meth:`iterate`)."""
-        def first(i, scratch):
-            z, u = self._states[i]
-            self.vectors.copy(scratch, z)
+        """z = K x, u = 0, and the vectors :meth:`iterate` carries (:meth:`refresh`)."""
+        for (op, _), (z, u), scratch in zip(self.blocks, self._states, self._scratches):
+            self.vectors.copy(self._forward(op, x, scratch), z)
             self.vectors.zero(u)
+        self.refresh(b, x, rho)
 
-        self._each_block(x, first, self._kz)
-        self._pixelwise("epi_first_rhs", self._rhs.data, self._cg[0].data, self._kz.data, x.data, b.data,
-                        self._weight_runs.data, np.float32(rho), np.int32(self.height), np.int32(self.width),
-                        self._pattern)
+    def _adjoint_of(self, fill, out):
+        """out = sum_b K_b^T v_b, ``fill(z, u, scratch)`` writing each block's v_b into its scratch."""
+        for i, ((op, _), (z, u), scratch) in enumerate(zip(self.blocks, self._states, self._scratches)):
+            fill(z, u, scratch)
+            self._adjoint(op, scratch, out, accumulate=self._accumulate(i))
+
+    def refresh(self, b, x, rho):
+        """The vectors :meth:`iterate` carries, from their definitions: ``kz = K^T z``, the right-hand side
+        ``A^T W b + rho K^T (z - u)`` and CG's residual ``rhs - N x`` (4 gathers)."""
+        self._adjoint_of(lambda z, u, scratch: self.vectors.copy(z, scratch), self._kz)
+        self._adjoint_of(lambda z, u, scratch: self.vectors.axpby(1.0, z, -1.0, u, scratch), self._rhs)
+        self._pixelwise("epi_rhs_finish", self._rhs.data, b.data, self._weight_runs.data, np.float32(rho),
+                        np.int32(self.height), np.int32(self.width), self._pattern)
+        residual, product = self._cg[0], self._cg[3]
+        self.normal(x, product, rho)
+        self.vectors.axpby(1.0, self._rhs, -1.0, product, residual)
 
     def solve(self, b, x0, params: AdmmParams, prior: EpiPrior, callback=None, lens_weights=None) -> AdmmResult:
         """Run ADMM on mosaic ``b`` [H, W] from ``x0`` [3, H, W] (float32 device arrays; x0 is not modified).
@@ -406,6 +424,8 @@ class EpiAdmmSolver:
         (``K^T (z' - z)``, which the dual residual needs anyway) besides its CG steps: with ``kz = K^T z``,
         ``u' = u + K x - z'`` and CG's final residual ``r = rhs - N x``, ``rho K^T K x = rhs - r - A^T W A x``
         gives ``rhs' = r + A^T W A x + rho (kz + 2 K^T (z' - z))`` and ``r' = rhs' - rhs + r`` (epi_carry_rhs).
+        Every :data:`EPI_REFRESH` iterations they are recomputed instead (:meth:`refresh`): the carry's float32
+        round-off grows with the iterations.
         """
         rho, vec, red = params.rho, self.vectors, self.reduce
         n_z = sum(z.size for z, _ in self._states)
@@ -429,9 +449,12 @@ class EpiAdmmSolver:
             self._each_block(x, z_u_step, dual)  # dual = K^T (z' - z)
             slot = 2 * len(self.blocks)
             red.enqueue(slot + 1, "norm2", dual)
-            self._pixelwise("epi_carry_rhs", self._rhs.data, residual.data, self._kz.data, dual.data, x.data,
-                            self._weight_runs.data, np.float32(rho), np.int32(self.height), np.int32(self.width),
-                            self._pattern)
+            if (len(history) + 1) % EPI_REFRESH:
+                self._pixelwise("epi_carry_rhs", self._rhs.data, residual.data, self._kz.data, dual.data, x.data,
+                                self._weight_runs.data, np.float32(rho), np.int32(self.height), np.int32(self.width),
+                                self._pattern)
+            else:
+                self.refresh(b, x, rho)
             self.runtime.launch("epi", "epi_misfit_rows", (self.height,), x.data, b.data, self._weight_runs.data,
                                 self._misfit_rows.data, np.int32(self.height), np.int32(self.width), self._pattern,
                                 defines=self._defines)
