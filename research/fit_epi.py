@@ -12,9 +12,9 @@ epipolar lines"). Not shipped in the wheel.
 
 ``trace``: for a grid of lam = c sigma (lam_fb = f lam, lam_xc = xc lam: the cross-channel block along the epipolar
 lines, rho, CG steps), starts (malvar, linear4d, guarded) and
-disparities (``shipped``: lfcl.depth.estimate_disparity with admm-epi's EPI_DEPTH_OPTIONS; ``occlusion``: the same
-with the half-aperture occlusion curves (called ``estimated`` in traces before the refit, ``noocc`` being the
-shipped one); ``trusted``: ``shipped`` with confidence 1 everywhere, so no fall-back block; ``truth``: the scene's
+disparities (``shipped``: lfcl.depth.estimate_disparity with admm-epi's EPI_DEPTH_OPTIONS, with the half-aperture
+occlusion curves since they came back (before that, ``shipped`` was without them and ``occlusion`` or ``estimated``
+with them); ``noocc``: the same without them; ``trusted``: ``shipped`` with confidence 1 everywhere, so no fall-back block; ``truth``: the scene's
 own, lfcl.sim.scenes.render_disparity, confidence 1, for comparison only), the PSNR (centre view, mean image, against the noise-free truth; without and with the lens safety net)
 after every iteration. The noise is the capture's DNG noise profile, as ``lfcl process`` reads it. ``fit``: per light level
 (training sigma), the rule (c, f, xc, start, iterations or stop at rms change <= r sigma) with the best mean gain over
@@ -103,7 +103,7 @@ def depth_for(kind, cap, noise, scene, seed, lenses) -> tuple[Depth, dict]:
     if kind == "truth":
         return Depth(gt, None), {"source": "truth", "seconds": 0.0}
     began = time.perf_counter()
-    options = {**EPI_DEPTH_OPTIONS, **({"occlusion": True} if kind == "occlusion" else {})}
+    options = {**EPI_DEPTH_OPTIONS, **({"occlusion": False} if kind == "noocc" else {})}
     est = estimate_disparity(cap.mosaic, cap.pattern, cap.pitch, noise=noise, **options)
     seconds = time.perf_counter() - began
     if kind == "trusted":  # the estimate with confidence 1 everywhere: no fall-back block
@@ -436,7 +436,7 @@ def main():
     parser.add_argument("--rho", default="1")
     parser.add_argument("--cg", default="5")
     parser.add_argument("--starts", default="malvar", help="trace: malvar, linear4d, guarded")
-    parser.add_argument("--depth", default="shipped", help="trace: shipped, occlusion, trusted, truth")
+    parser.add_argument("--depth", default="shipped", help="trace: shipped, noocc, trusted, truth")
     parser.add_argument("--iterations", type=int, default=30)
     parser.add_argument("--top", type=int, default=8)
     parser.add_argument("--real", action="store_true", help="table: also the light fields antinous and 2067")

@@ -10,7 +10,7 @@ import pytest
 from conftest import shared_path
 
 from lfcl.depth import badpix, candidates, depth_scores, estimate_disparity, mse100, read_pfm
-from lfcl.depth.cost import CostVolume, cost_volume_np
+from lfcl.depth.cost import CostVolume, cost_volume_np, half_apertures
 from lfcl.noise.model import NoiseEstimate
 from lfcl.sim.capture import simulate
 from lfcl.sim.deadleaves import DeadLeavesTexture, _texture_box
@@ -35,6 +35,28 @@ def test_device_cost_volume_matches_numpy(runtime, rng, case):
     scale = np.abs(expected).max()
     np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-5 * scale)
     assert expected[1].max() > 0  # some samples were gathered (saturation left some in)
+
+
+@pytest.mark.parametrize("S, T, U, V, model, origin", [(3, 4, 9, 9, "plane", (0, 0)), (2, 3, 4, 6, "mean", (1, 0)),
+                                                     (2, 2, 1, 2, "plane", (0, 1)), (1, 1, 5, 3, "plane", (1, 1))],
+                         ids=str)
+def test_device_half_apertures_in_one_gather_match_numpy(runtime, rng, S, T, U, V, model, origin):
+    mosaic = rng.uniform(0.05, 0.6, (S * U, T * V)).astype(np.float32)
+    ds = np.array([-1.3, -0.5, 0.0, 0.35, 1.0], np.float32)
+    apertures = [None, *half_apertures(U, V)]
+    expected = np.stack([cost_volume_np(mosaic, "GRBG", (U, V), ds, origin=origin, noise=(1e-3, 1e-4),
+                                        saturation=0.55, model=model, views=views) for views in apertures])
+    op = CostVolume(runtime, mosaic.shape, "GRBG", (U, V), ds, origin=origin, model=model, halves=True)
+    got = op.forward(runtime.to_device(mosaic), (1e-3, 1e-4), 0.55).get()
+    assert got.shape == (5, 2, ds.size, S, T)
+    np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-5 * np.abs(expected).max())
+    with pytest.raises(ValueError, match="gathers every view"):
+        op.forward(runtime.to_device(mosaic), (1e-3, 1e-4), 0.55, views=(0, 1, 0, 1))
+
+
+def test_half_apertures_hold_the_centre_rows_and_columns():
+    assert half_apertures(9, 9) == [(0, 4, 0, 8), (4, 8, 0, 8), (0, 8, 0, 4), (0, 8, 4, 8)]
+    assert half_apertures(4, 4) == [(0, 2, 0, 3), (1, 3, 0, 3), (0, 3, 0, 2), (0, 3, 1, 3)]
 
 
 def test_cost_is_zero_in_expectation_for_pure_noise(rng):
@@ -267,7 +289,7 @@ def test_smoothing_fills_unknown_lenses_from_their_neighbours(rng):
     assert np.abs(smooth.disparity[hole] - plain.disparity[hole]).max() > 1e-3
 
 
-@pytest.mark.parametrize("planes, lenses, radius", [(1, (1, 1), 0), (3, (5, 7), 1), (4, (9, 6), 4), (2, (3, 2), 4)])
+@pytest.mark.parametrize("planes, lenses, radius", [(1, (1, 1), 0), (3, (5, 7), 1), (4, (9, 6), 4), (2, (3, 2), 4), (19, (4, 5), 2)])
 def test_device_window_aggregation_matches_numpy(runtime, rng, planes, lenses, radius):
     from lfcl.depth.cost import WindowAggregate, aggregate_window_np, window_offsets
 
@@ -285,3 +307,11 @@ def test_device_window_aggregation_matches_numpy(runtime, rng, planes, lenses, r
     with pytest.raises(ValueError, match="weights must be float32 of shape"):
         WindowAggregate(runtime, planes, lenses, radius).forward(runtime.to_device(maps),
                                                                  runtime.to_device(weights[:-1]))
+    # Planes of a larger stack, read in place.
+    stack = np.concatenate([rng.standard_normal((2, *lenses)).astype(np.float32), maps])
+    got = WindowAggregate(runtime, planes, lenses, radius).forward(runtime.to_device(stack),
+                                                                   runtime.to_device(weights), first=2).get()
+    np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-5)
+    with pytest.raises(ValueError, match="no planes"):
+        WindowAggregate(runtime, planes, lenses, radius).forward(runtime.to_device(stack),
+                                                                 runtime.to_device(weights), first=3)

@@ -52,6 +52,13 @@ def _parse_model(model: str) -> int:
     return MODELS[model]
 
 
+def half_apertures(U: int, V: int) -> list[tuple[int, int, int, int]]:
+    """The four half apertures ``(u_lo, u_hi, v_lo, v_hi)`` of a ``U x V`` lens: the views above, below, left
+    and right of the centre, each with the centre row or column (both centre rows or columns of an even pitch)."""
+    uc, vc = U // 2, V // 2
+    return [(0, uc, 0, V - 1), (U - 1 - uc, U - 1, 0, V - 1), (0, U - 1, 0, vc), (0, U - 1, V - 1 - vc, V - 1)]
+
+
 def _views(views, U, V) -> tuple[int, int, int, int]:
     """The gathered views ``(u_lo, u_hi, v_lo, v_hi)``, clipped to the lens; ``ValueError`` if empty."""
     if views is None:
@@ -154,10 +161,14 @@ def cost_volume_np(mosaic, pattern: str, pitch, disparities, *, origin=(0, 0), n
 
 
 class CostVolume:
-    """The cost volume on the device (``lfcl/kernels/depth.cl``) for an ``[S*U, T*V]`` mosaic."""
+    """The cost volume on the device (``lfcl/kernels/depth.cl``) for an ``[S*U, T*V]`` mosaic.
+
+    ``halves``: one gather gives the full aperture's volume and those of the four :func:`half_apertures`,
+    ``[5, 2, ND, S, T]`` (the twin: :func:`cost_volume_np` of each aperture); the shared views are gathered once
+    (at 128x128 lenses, 41 candidates, 2-core PoCL: docs/depth.md, "Timing")."""
 
     def __init__(self, runtime, sensor_shape, pattern: str, pitch, disparities, *, origin=(0, 0),
-                 model: str = "plane"):
+                 model: str = "plane", halves: bool = False):
         self.runtime = runtime
         self.U, self.V, self.S, self.T = _checks.grid(tuple(int(n) for n in sensor_shape), pitch)
         self.sensor_shape = (self.S * self.U, self.T * self.V)
@@ -167,11 +178,13 @@ class CostVolume:
         if self.disparities.size < 1 or not np.all(np.isfinite(self.disparities)):
             raise ValueError("disparities must be a non-empty finite list")
         self._disparities = runtime.to_device(self.disparities)
-        self.shape = (2, self.disparities.size, self.S, self.T)
+        self.halves = bool(halves)
+        self.shape = (5,) * self.halves + (2, self.disparities.size, self.S, self.T)
 
     def forward(self, mosaic, noise=(0.0, 1.0), saturation: float = np.inf, views=None, out=None):
         """``[S*U, T*V]`` float32 device mosaic -> ``[2, ND, S, T]`` float32 device cost volume
-        (``views``: as :func:`cost_volume_np`)."""
+        (``views``: as :func:`cost_volume_np`), or with ``halves`` ``[5, 2, ND, S, T]``: the full aperture,
+        then the four :func:`half_apertures` (no ``views``)."""
         from ..device import grid_defines
         from ..ops import check_device_array, output
 
@@ -182,13 +195,16 @@ class CostVolume:
             raise ValueError(f"depth: the noise model (gain {gain:.3g}, floor {floor:.3g}) lies beyond float32: "
                              "a normalised raw should lie near [0, 1]")
         sat = np.float32(min(float(saturation), 3.0e38))
+        if self.halves and views is not None:
+            raise ValueError("a cost volume with the half apertures gathers every view: no views")
         u_lo, u_hi, v_lo, v_hi = _views(views, self.U, self.V)
         self.runtime.launch(
             "depth", "depth_cost", (self.T, self.S, self.disparities.size), mosaic.data, self._disparities.data,
             out.data, np.int32(self.S), np.int32(self.T), np.int32(self.disparities.size), self.pattern,
             np.float32(gain), np.float32(floor), sat, np.int32(u_lo), np.int32(u_hi), np.int32(v_lo), np.int32(v_hi),
             defines=(*grid_defines((self.U, self.V), 0), ("PLANE_MODEL", self.plane),
-                     ("RIDGE_PPM", round(RIDGE * 1e6)), ("MIN_WEIGHT_PPM", round(MIN_WEIGHT * 1e6))),
+                     ("RIDGE_PPM", round(RIDGE * 1e6)), ("MIN_WEIGHT_PPM", round(MIN_WEIGHT * 1e6)),
+                     ("HALVES", int(self.halves))),
         )
         return out
 
@@ -211,6 +227,9 @@ def aggregate_window_np(maps: np.ndarray, offsets, weights: np.ndarray) -> np.nd
     return out
 
 
+AGGREGATE_CHUNK = 8  # planes per work-item of lfcl/kernels/depth_aggregate.cl
+
+
 class WindowAggregate:
     """:func:`aggregate_window_np` on the device (lfcl/kernels/depth_aggregate.cl) for a stack of
     ``planes`` lens maps [S, T] and the weights of :func:`window_offsets` ``(radius)``. At 500x500 lenses
@@ -224,15 +243,22 @@ class WindowAggregate:
         self.maps_shape = (self.planes, self.S, self.T)
         self.weights_shape = ((2 * self.radius + 1) ** 2, self.S, self.T)
 
-    def forward(self, maps, weights, out=None):
-        """``[P, S, T]`` float32 device maps, ``[(2R + 1)^2, S, T]`` device weights -> ``[P, S, T]`` window sums."""
+    def forward(self, maps, weights, out=None, first: int = 0):
+        """``[P, S, T]`` float32 device maps, ``[(2R + 1)^2, S, T]`` device weights -> ``[P, S, T]`` window sums;
+        ``first``: the P maps start at that plane of a larger ``[N, S, T]`` stack (one aperture of a
+        :class:`CostVolume` with the half apertures, without a copy)."""
         from ..device import grid_defines
         from ..ops import check_device_array, output
 
-        check_device_array(maps, self.maps_shape, "maps")
+        stack = max(maps.shape[0], self.planes) if len(maps.shape) == 3 else self.planes
+        check_device_array(maps, (stack, self.S, self.T), "maps")
+        if not (isinstance(first, (int, np.integer)) and first >= 0 and first + self.planes <= stack):
+            raise ValueError(f"maps: no planes {first}..{first + self.planes - 1} in a stack of {stack}")
         check_device_array(weights, self.weights_shape, "weights")
         out = output(self.runtime, out, self.maps_shape)
-        self.runtime.launch("depth_aggregate", "depth_aggregate", (self.T, self.S, self.planes), maps.data, weights.data,
+        chunks = -(-self.planes // AGGREGATE_CHUNK)
+        self.runtime.launch("depth_aggregate", "depth_aggregate", (self.T, self.S, chunks), maps.data, weights.data,
                             out.data, np.int32(self.S), np.int32(self.T), np.int32(self.planes),
-                            np.int32(self.radius), defines=grid_defines((1, 1), 0))
+                            np.int32(self.radius), np.int32(first),
+                            defines=(*grid_defines((1, 1), 0), ("CHUNK", AGGREGATE_CHUNK)))
         return out

@@ -39,7 +39,15 @@ import numpy as np
 
 from ..layout import channel_map, parse_pattern
 from . import _checks
-from .cost import MODELS, CostVolume, WindowAggregate, aggregate_window_np, cost_volume_np, window_offsets
+from .cost import (
+    MODELS,
+    CostVolume,
+    WindowAggregate,
+    aggregate_window_np,
+    cost_volume_np,
+    half_apertures,
+    window_offsets,
+)
 
 DEFAULTS = {
     "dmax": 2.0,  # search range [-dmax, dmax], lenses per view step
@@ -340,37 +348,40 @@ def estimate_disparity(mosaic, pattern, pitch, *, origin=(0, 0), noise=None, dev
     ds = candidates(opts["dmax"], opts["step"])
     seconds = {"noise": time.perf_counter() - t_start}
 
-    subsets = [None]
-    if opts["occlusion"]:
-        uc, vc = U // 2, V // 2  # halves share the centre row / column
-        subsets += [(0, uc, 0, V - 1), (U - 1 - uc, U - 1, 0, V - 1), (0, U - 1, 0, vc), (0, U - 1, V - 1 - vc, V - 1)]
+    subsets = [None] + (half_apertures(U, V) if opts["occlusion"] else [])
+    cost_seconds = 0.0
     guide = _guide(mosaic, pattern, (U, V), origin, S, T)
     offsets, wwin = _window_weights(guide, opts["radius"], opts["guide_sigma"], gain, floor)
     if opts["backend"] == "numpy":
-        def aggregated(views, want_seen):
-            """The window sums of the volume's excess and weight, and (``want_seen``) the lenses that gathered
-            any sample."""
+        def aggregated(index, want_seen):
+            """The window sums of aperture ``index``'s excess and weight, and (``want_seen``) the lenses that
+            gathered any sample."""
             volume = cost_volume_np(mosaic, pattern, (U, V), ds, origin=origin, noise=(gain, floor),
-                                    saturation=opts["saturation"], model=opts["model"], views=views)
+                                    saturation=opts["saturation"], model=opts["model"], views=subsets[index])
             return (aggregate_window_np(volume[0], offsets, wwin), aggregate_window_np(volume[1], offsets, wwin),
                     volume[1].max(axis=0) > 0 if want_seen else None)
-    else:  # the volume stays on the device; only its window sums come back
+    else:  # the volumes stay on the device (one gather for every aperture); only their window sums come back
         from ..device import get_runtime
 
         runtime = get_runtime(device)
-        op = CostVolume(runtime, mosaic.shape, pattern, (U, V), ds, origin=origin, model=opts["model"])
+        op = CostVolume(runtime, mosaic.shape, pattern, (U, V), ds, origin=origin, model=opts["model"],
+                        halves=opts["occlusion"])
         window = WindowAggregate(runtime, 2 * ds.size, (S, T), opts["radius"])
         data, weights = runtime.to_device(mosaic), runtime.to_device(wwin.astype(np.float32))
-
-        def aggregated(views, want_seen):
-            volume = op.forward(data, (gain, floor), opts["saturation"], views)
-            sums = window.forward(volume.reshape(2 * ds.size, S, T), weights).get().astype(np.float64)
-            return sums[:ds.size], sums[ds.size:], volume[1].get().max(axis=0) > 0 if want_seen else None
-
-    best, seen, cost_seconds = None, None, 0.0
-    for index, views in enumerate(subsets):  # one volume at a time: memory stays ~3 volumes
         start = time.perf_counter()
-        agg_excess, agg_weight, gathered = aggregated(views, want_seen=seen is None)
+        volumes = op.forward(data, (gain, floor), opts["saturation"]).reshape(len(subsets) * 2 * ds.size, S, T)
+        cost_seconds += time.perf_counter() - start
+
+        def aggregated(index, want_seen):
+            first = index * 2 * ds.size
+            sums = window.forward(volumes, weights, first=first).get().astype(np.float64)
+            gathered = volumes[first + ds.size:first + 2 * ds.size].get().max(axis=0) > 0 if want_seen else None
+            return sums[:ds.size], sums[ds.size:], gathered
+
+    best, seen = None, None
+    for index in range(len(subsets)):  # one aperture's window sums at a time on the host
+        start = time.perf_counter()
+        agg_excess, agg_weight, gathered = aggregated(index, want_seen=seen is None)
         cost_seconds += time.perf_counter() - start
         if seen is None:
             seen = gathered  # lenses that gathered any sample (the full aperture's volume)

@@ -10,86 +10,44 @@
 // Values are taken relative to the lens's own centre pixel (conditioning in float32 only).
 //
 // Build-time constants: PITCH_U, PITCH_V, PLANE_MODEL (0/1), RIDGE_PPM and MIN_WEIGHT_PPM (the
-// ridge factor and the smallest colour weight kept, in millionths).
-// Only the views u_lo <= u <= u_hi, v_lo <= v <= v_hi are gathered (a half aperture sees past an
-// occluder that the other half runs into).
-// Output: cost[0][k][s][t] = excess, cost[1][k][s][t] = weight. Global size (T, S, ND).
+// ridge factor and the smallest colour weight kept, in millionths), HALVES (0/1).
+// Without HALVES only the views u_lo <= u <= u_hi, v_lo <= v <= v_hi are gathered (a half aperture sees
+// past an occluder that the other half runs into).
+// Output: cost[a][0][k][s][t] = excess, cost[a][1][k][s][t] = weight of aperture a (one, or five with
+// HALVES). Global size (T, S, ND).
 
 #define RIDGE (RIDGE_PPM * 1e-6f)
 #define MIN_WEIGHT (MIN_WEIGHT_PPM * 1e-6f)
 #define NSUM 16
+// HALVES=1: one gather for the full aperture and the four half apertures (top u <= U/2, bottom
+// u >= U - 1 - U/2, left v <= V/2, right v >= V - 1 - V/2; lfcl.depth.cost.half_apertures). The views
+// fall into 3x3 regions (rows above / in / below the shared centre rows, likewise columns); each
+// region's sums are gathered once and added to every aperture that holds it, instead of gathering
+// the shared views once per aperture (81 + 4 x 45 gathers of 9x9 views).
+#if HALVES
+#define NSUB 5
+#define NREG 3
+#else
+#define NSUB 1
+#define NREG 1
+#endif
 
-__kernel void depth_cost(__global const float *mosaic, __constant float *disparities, __global float *cost,
-                         const int S, const int T, const int ND, const int pattern,
-                         const float gain, const float floor_var, const float saturation,
-                         const int u_lo, const int u_hi, const int v_lo, const int v_hi)
+// The views of region r (0..NREG-1) along one axis of n views, clipped to [lo, hi].
+inline int2 region_views(const int r, const int n, const int lo, const int hi)
 {
-    const int t = get_global_id(0);
-    const int s = get_global_id(1);
-    const int k = get_global_id(2);
-    if (t >= T || s >= S || k >= ND)
-        return;
-    const int W = T * PITCH_V;
-    const float d = disparities[k];
-    const float uc = 0.5f * (float)(PITCH_U - 1);
-    const float vc = 0.5f * (float)(PITCH_V - 1);
-    const float ref = mosaic[(s * PITCH_U + PITCH_U / 2) * W + t * PITCH_V + PITCH_V / 2];
+#if HALVES
+    const int mid = n / 2;
+    const int first = r == 0 ? 0 : (r == 1 ? n - 1 - mid : mid + 1);
+    const int last = r == 0 ? n - 2 - mid : (r == 1 ? mid : n - 1);
+    return (int2)(max(first, lo), min(last, hi));
+#else
+    return (int2)(max(lo, 0), min(hi, n - 1));
+#endif
+}
 
-    float acc[3][NSUM];
-    for (int c = 0; c < 3; ++c)
-        for (int j = 0; j < NSUM; ++j)
-            acc[c][j] = 0.0f;
-
-    for (int u = max(u_lo, 0); u <= min(u_hi, PITCH_U - 1); ++u) {
-        const float y = (float)s - d * ((float)u - uc);
-        const float y0 = floor(y);
-        const float fy = y - y0;
-        for (int v = max(v_lo, 0); v <= min(v_hi, PITCH_V - 1); ++v) {
-            const float x = (float)t - d * ((float)v - vc);
-            const float x0 = floor(x);
-            const float fx = x - x0;
-            for (int a = 0; a < 2; ++a) {
-                const int sp = (int)y0 + a;
-                const float wy = a ? fy : 1.0f - fy;
-                if (sp < 0 || sp >= S || !(wy > 0.0f))
-                    continue;
-                const float py = (float)a - fy;
-                const int row = sp * PITCH_U + u;
-                for (int b = 0; b < 2; ++b) {
-                    const int tp = (int)x0 + b;
-                    const float wx = b ? fx : 1.0f - fx;
-                    if (tp < 0 || tp >= T || !(wx > 0.0f))
-                        continue;
-                    const float px = (float)b - fx;
-                    const int col = tp * PITCH_V + v;
-                    const float raw = mosaic[row * W + col];
-                    if (!(raw < saturation))
-                        continue;
-                    const float value = raw - ref;
-                    const float w = wy * wx;
-                    const float w2 = w * w;
-                    const int c = bayer_colour(row, col, pattern);
-                    acc[c][0] += w;
-                    acc[c][1] += w * py;
-                    acc[c][2] += w * px;
-                    acc[c][3] += w * py * py;
-                    acc[c][4] += w * px * px;
-                    acc[c][5] += w * py * px;
-                    acc[c][6] += w * value;
-                    acc[c][7] += w * value * py;
-                    acc[c][8] += w * value * px;
-                    acc[c][9] += w * value * value;
-                    acc[c][10] += w2;
-                    acc[c][11] += w2 * py;
-                    acc[c][12] += w2 * px;
-                    acc[c][13] += w2 * py * py;
-                    acc[c][14] += w2 * px * px;
-                    acc[c][15] += w2 * py * px;
-                }
-            }
-        }
-    }
-
+// excess and weight of one aperture's per-colour sums (values less ref).
+inline float2 aperture_cost(float acc[3][NSUM], const float ref, const float gain, const float floor_var)
+{
     float excess = 0.0f, weight = 0.0f;
     for (int c = 0; c < 3; ++c) {
         const float Wc = acc[c][0];
@@ -126,7 +84,104 @@ __kernel void depth_cost(__global const float *mosaic, __constant float *dispari
         excess += rss / nv - (Wc - trace);
         weight += Wc;
     }
-    const int plane = S * T;
-    cost[(size_t)k * plane + s * T + t] = excess;
-    cost[(size_t)(ND + k) * plane + s * T + t] = weight;
+    return (float2)(excess, weight);
+}
+
+__kernel void depth_cost(__global const float *mosaic, __constant float *disparities, __global float *cost,
+                         const int S, const int T, const int ND, const int pattern,
+                         const float gain, const float floor_var, const float saturation,
+                         const int u_lo, const int u_hi, const int v_lo, const int v_hi)
+{
+    const int t = get_global_id(0);
+    const int s = get_global_id(1);
+    const int k = get_global_id(2);
+    if (t >= T || s >= S || k >= ND)
+        return;
+    const int W = T * PITCH_V;
+    const float d = disparities[k];
+    const float uc = 0.5f * (float)(PITCH_U - 1);
+    const float vc = 0.5f * (float)(PITCH_V - 1);
+    const float ref = mosaic[(s * PITCH_U + PITCH_U / 2) * W + t * PITCH_V + PITCH_V / 2];
+
+    float total[NSUB][3][NSUM];
+    for (int a = 0; a < NSUB; ++a)
+        for (int c = 0; c < 3; ++c)
+            for (int j = 0; j < NSUM; ++j)
+                total[a][c][j] = 0.0f;
+
+    for (int ry = 0; ry < NREG; ++ry) {
+        const int2 us = region_views(ry, PITCH_U, u_lo, u_hi);
+        for (int rx = 0; rx < NREG; ++rx) {
+            const int2 vs = region_views(rx, PITCH_V, v_lo, v_hi);
+            float acc[3][NSUM];
+            for (int c = 0; c < 3; ++c)
+                for (int j = 0; j < NSUM; ++j)
+                    acc[c][j] = 0.0f;
+            for (int u = us.x; u <= us.y; ++u) {
+                const float y = (float)s - d * ((float)u - uc);
+                const float y0 = floor(y);
+                const float fy = y - y0;
+                for (int v = vs.x; v <= vs.y; ++v) {
+                    const float x = (float)t - d * ((float)v - vc);
+                    const float x0 = floor(x);
+                    const float fx = x - x0;
+                    for (int a = 0; a < 2; ++a) {
+                        const int sp = (int)y0 + a;
+                        const float wy = a ? fy : 1.0f - fy;
+                        if (sp < 0 || sp >= S || !(wy > 0.0f))
+                            continue;
+                        const float py = (float)a - fy;
+                        const int row = sp * PITCH_U + u;
+                        for (int b = 0; b < 2; ++b) {
+                            const int tp = (int)x0 + b;
+                            const float wx = b ? fx : 1.0f - fx;
+                            if (tp < 0 || tp >= T || !(wx > 0.0f))
+                                continue;
+                            const float px = (float)b - fx;
+                            const int col = tp * PITCH_V + v;
+                            const float raw = mosaic[row * W + col];
+                            if (!(raw < saturation))
+                                continue;
+                            const float value = raw - ref;
+                            const float w = wy * wx;
+                            const float w2 = w * w;
+                            const int c = bayer_colour(row, col, pattern);
+                            acc[c][0] += w;
+                            acc[c][1] += w * py;
+                            acc[c][2] += w * px;
+                            acc[c][3] += w * py * py;
+                            acc[c][4] += w * px * px;
+                            acc[c][5] += w * py * px;
+                            acc[c][6] += w * value;
+                            acc[c][7] += w * value * py;
+                            acc[c][8] += w * value * px;
+                            acc[c][9] += w * value * value;
+                            acc[c][10] += w2;
+                            acc[c][11] += w2 * py;
+                            acc[c][12] += w2 * px;
+                            acc[c][13] += w2 * py * py;
+                            acc[c][14] += w2 * px * px;
+                            acc[c][15] += w2 * py * px;
+                        }
+                    }
+                }
+            }
+            // The apertures that hold this region: the full one, and (HALVES) top, bottom, left, right.
+            for (int a = 0; a < NSUB; ++a) {
+                const bool holds = a == 0 || (a == 1 && ry <= 1) || (a == 2 && ry >= 1) || (a == 3 && rx <= 1)
+                                   || (a == 4 && rx >= 1);
+                if (holds)
+                    for (int c = 0; c < 3; ++c)
+                        for (int j = 0; j < NSUM; ++j)
+                            total[a][c][j] += acc[c][j];
+            }
+        }
+    }
+
+    const size_t plane = (size_t)S * T;
+    for (int a = 0; a < NSUB; ++a) {
+        const float2 ew = aperture_cost(total[a], ref, gain, floor_var);
+        cost[((size_t)a * 2 * ND + k) * plane + s * T + t] = ew.x;
+        cost[((size_t)a * 2 * ND + ND + k) * plane + s * T + t] = ew.y;
+    }
 }

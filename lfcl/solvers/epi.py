@@ -109,13 +109,15 @@ EPI_SCHEDULE = (  # the median sigma of the training captures at 0.5, 2, 12 and 
                xc_per_lam=1.0),
 )
 
-#: lfcl.depth.estimate_disparity's options for admm-epi (its own defaults otherwise): without the half-aperture
-#: occlusion curves the disparity costs a third of the time and admm-epi's centre view moved by -0.16..+0.08 dB
-#: on the training captures (docs/admm.md, "admm-epi").
+#: lfcl.depth.estimate_disparity's options for admm-epi (its own defaults otherwise, the half apertures among them):
+#: without the half apertures a smooth plane in front of a grating (research/training_scenes.py seed 1000) took
+#: the foreground's disparity on a band of background lenses and admm-epi fell 0.84 dB below Malvar at 50 lux;
+#: with them it gains +2.35 dB there, +0.14 / +0.22 dB on average on the training captures and -0.01 / +0.03 on
+#: held-out ones (docs/admm.md, "admm-epi").
 #: The candidates 0.1 lens apart instead of 0.05 (the parabola refines between them): on the training captures the
 #: centre view moved by -0.003 dB on average (-0.03..+0.04), the disparity took half the time and admm-epi 14 % less
 #: (research/epi_depth_step.py). The depth output keeps estimate_disparity's own step.
-EPI_DEPTH_OPTIONS: dict = {"occlusion": False, "step": 0.1}
+EPI_DEPTH_OPTIONS: dict = {"step": 0.1}
 
 
 def epi_setting(sigma: float, schedule=None) -> EpiSetting:
