@@ -88,6 +88,14 @@ def scores(planes, truth) -> dict:
     return lightfield_scores(planes_to_exchange(planes, LightFieldShape.from_exchange(truth)), truth)
 
 
+def colour_of(planes, truth) -> dict:
+    """Mean CIEDE2000 of the centre view and of the mean image (lfcl.evaluation.metrics.colour_scores)."""
+    from lfcl.evaluation.metrics import lightfield_colour_scores
+
+    got = lightfield_colour_scores(planes_to_exchange(planes, LightFieldShape.from_exchange(truth)), truth)
+    return {"de2000_center": got["de2000_mean_center"], "de2000_mean": got["de2000_mean_mean"]}
+
+
 @dataclasses.dataclass
 class Depth:
     disparity: np.ndarray
@@ -356,7 +364,8 @@ def run_table(args):
                                        noise=None if method == "malvar" else noise)
                 seconds = time.perf_counter() - began
                 row = {"scene": scene, "seed": seed, "lux": lux, "method": method, "net": net, "seconds": seconds,
-                       "iterations": result.iterations, **scores(result.planes, cap.truth)}
+                       "iterations": result.iterations, **scores(result.planes, cap.truth),
+                       **colour_of(result.planes, cap.truth)}
                 if method == "admm-epi":
                     row["disparity"] = result.parameters["disparity"]
                     row["lam_per_sigma"] = result.parameters["lam"] / result.noise.sigma
@@ -386,6 +395,24 @@ def format_table(rows: list[dict], net: bool) -> str:
             f" | {e['psnr_center']:.2f} / {e['psnr_mean']:.2f} | {e['psnr_center'] - m['psnr_center']:+.2f} / "
             f"{e['psnr_mean'] - m['psnr_mean']:+.2f} | {e['psnr_center'] - bc:+.2f} / {e['psnr_mean'] - bm:+.2f} | "
             f"{e['seconds']:.1f} | {cell[(*k, 'admm-uv')]['seconds']:.2f} | {cell[(*k, 'admm-uvst')]['seconds']:.2f} |")
+    return "\n".join(lines)
+
+
+def format_colour_table(rows: list[dict], net: bool) -> str:
+    """Mean CIEDE2000 (centre view / mean image) per method; lower is better (tables from before it: none)."""
+    cell = {(r["scene"], r["seed"], r["lux"], r["method"]): r for r in rows
+            if (r["net"] == net or r["method"] == "malvar") and "de2000_center" in r}
+    methods = [m for m in (*OTHERS, "admm-epi") if any(k[3] == m for k in cell)]
+    keys = sorted({k[:3] for k in cell if (*k[:3], "admm-epi") in cell})
+    head = "| scene | seed | lux | " + " | ".join(methods) + " | epi - best other |"
+    lines = [head, "|---" * (head.count("|") - 1) + "|"]
+    for k in keys:
+        e = cell[(*k, "admm-epi")]
+        others = [cell[(*k, m)] for m in methods if m != "admm-epi"]
+        lines.append(f"| {k[0]} | {k[1]} | {k[2]:g} | " + " | ".join(
+            f"{cell[(*k, m)]['de2000_center']:.3f} / {cell[(*k, m)]['de2000_mean']:.3f}" for m in methods) +
+            f" | {e['de2000_center'] - min(o['de2000_center'] for o in others):+.3f} / "
+            f"{e['de2000_mean'] - min(o['de2000_mean'] for o in others):+.3f} |")
     return "\n".join(lines)
 
 
@@ -497,6 +524,8 @@ def main():
                 rows += json.load(fh)["rows"]
         for net in (False, True):
             print(f"\nsafety net {'on' if net else 'off'}\n\n" + format_table(rows, net))
+        if any("de2000_center" in r for r in rows):
+            print("\nmean CIEDE2000, centre view / mean image (safety net on)\n\n" + format_colour_table(rows, True))
         return
     if args.output:
         with open(args.output, "w") as fh:
