@@ -43,12 +43,10 @@ from lfcl.layout import LightFieldShape, planes_to_exchange
 from lfcl.noise.model import from_noise_profile
 from lfcl.ops.malvar import Malvar
 from lfcl.solvers.epi import EPI_DEPTH_OPTIONS, EPI_SCHEDULE, EpiAdmmSolver, EpiPrior
-from lfcl.solvers.epi_pd import EpiPdSolver
 from lfcl.solvers.params import AdmmParams
 
 REAL = {"antinous": "../shared/realdata/hci_epinet/antinous", "lytro2067": "../shared/realdata/lytro_epinet/2067"}
 OTHERS = ("malvar", "linear4d", "admm-uv", "admm-uvst", "admm-uv-xc")
-SOLVERS = {"admm": EpiAdmmSolver, "pd": EpiPdSolver}
 
 
 PROCEDURAL = "procedural-"  # research/training_scenes.py's scene of that seed (linear4d's training family)
@@ -150,7 +148,7 @@ def run_trace(args):
         noise = noise_of(cap)
         base = scores(demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), "malvar").planes, cap.truth)
         b = runtime.to_device(cap.mosaic)
-        solver = SOLVERS[args.solver](runtime, cap.mosaic.shape, cap.pattern, cap.pitch)
+        solver = EpiAdmmSolver(runtime, cap.mosaic.shape, cap.pattern, cap.pitch)
         for depth_kind in args.depth:
             depth, depth_meta = depth_for(depth_kind, cap, noise, scene, seed, lenses)
             for start in args.starts:
@@ -183,8 +181,7 @@ def run_trace(args):
                           f"{best['psnr_center_net']:.2f} at {best['iteration']} (mean {best['psnr_mean_net']:.2f}), "
                           f"last {rows[-1]['psnr_center_net']:.2f}/{rows[-1]['psnr_mean_net']:.2f} "
                           f"[{time.perf_counter() - began:.1f} s] {json.dumps(depth_meta)}", flush=True)
-                    out.append({"solver": args.solver, "scene": scene, "seed": seed, "lux": lux, "sigma": noise.sigma,
-                                "depth": depth_kind,
+                    out.append({"scene": scene, "seed": seed, "lux": lux, "sigma": noise.sigma, "depth": depth_kind,
                                 "start": start, "c": c, "f": f, "xc": xc, "rho": rho, "cg_steps": cg, "malvar": base,
                                 "start_scores": start_scores, "depth_meta": depth_meta, "trace": rows})
     return out
@@ -254,8 +251,7 @@ def run_fit(args):
     for lux in sorted(by_lux):
         groups: dict = {}
         for r in by_lux[lux]:
-            key = (r["depth"], r["start"], r["c"], r["f"], r.get("xc", 0.0), r["rho"], r["cg_steps"],
-                   r.get("solver", "admm"))
+            key = (r["depth"], r["start"], r["c"], r["f"], r.get("xc", 0.0), r["rho"], r["cg_steps"])
             groups.setdefault(key, []).append(r)
         n = max(len(g) for g in groups.values())
         rules = []
@@ -267,7 +263,7 @@ def run_fit(args):
                 s["qualifies"] = s["worst_centre"] > 0 and s["worst_mean"] >= -0.1
                 s["score"] = s["mean_centre"] if s["qualifies"] else -100 + s["mean_centre"]
                 rules.append({"depth": key[0], "start": key[1], "c": key[2], "f": key[3], "xc": key[4],
-                              "rho": key[5], "cg_steps": key[6], "solver": key[7], **s})
+                              "rho": key[5], "cg_steps": key[6], **s})
         if best is not None:  # the worst gain over the best other method, ties within 0.05 dB by its mean
             top = max((r["worst_over_best"] for r in rules if r["qualifies"]), default=-np.inf)
             for r in rules:
@@ -499,8 +495,6 @@ def main():
     parser.add_argument("--rho", default="1")
     parser.add_argument("--cg", default="5")
     parser.add_argument("--starts", default="malvar", help="trace: malvar, linear4d, guarded")
-    parser.add_argument("--solver", default="admm", choices=tuple(SOLVERS),
-                        help="trace: admm (EpiAdmmSolver) or pd (EpiPdSolver; --rho balances its steps)")
     parser.add_argument("--no-net", action="store_true", help="trace: skip the safety-net scores (faster)")
     parser.add_argument("--depth", default="shipped", help="trace: shipped, noocc, trusted, truth")
     parser.add_argument("--iterations", type=int, default=30)

@@ -13,7 +13,6 @@ from conftest import relative_dot_error
 from lfcl.ops.epi import (
     EpiGradient,
     epi_adjoint_np,
-    epi_column_abs_sums_np,
     epi_diagonal_np,
     epi_gradient_np,
     epi_gram_np,
@@ -139,8 +138,6 @@ def test_device_matches_numpy(runtime, rng, geometry):
     np.testing.assert_allclose(op.gram(runtime.to_device(x)).get(), epi_gram_np(x64, disparity, (U, V), confidence),
                                atol=2e-5)
     np.testing.assert_allclose(op.diagonal().get(), epi_diagonal_np(disparity, (U, V), matrix=M), atol=2e-6)
-    np.testing.assert_allclose(op.column_abs_sums().get(), epi_column_abs_sums_np(disparity, (U, V), matrix=M),
-                               atol=2e-6)
     # accumulate adds into out
     base = rng.standard_normal(x.shape).astype(np.float32)
     total = op.adjoint(runtime.to_device(z), out=runtime.to_device(base), accumulate=True).get()
@@ -191,16 +188,6 @@ def test_diagonal_is_the_gram_diagonal(rng):
                for j in range(eye.shape[0])]
     np.testing.assert_allclose(epi_diagonal_np(disparity, (U, V), confidence).ravel(), np.diag(np.stack(columns, 1)),
                                atol=1e-12)
-
-
-def test_column_abs_sums_by_definition(rng):
-    S, T, U, V = 4, 3, 3, 3
-    disparity, confidence = maps(rng, S, T, spread=2.0)
-    eye = np.eye(S * U * T * V)
-    columns = [epi_gradient_np(eye[j].reshape(1, S * U, T * V), disparity, (U, V), confidence).ravel()
-               for j in range(eye.shape[0])]  # D's column j: the differences of the j-th unit sample
-    np.testing.assert_allclose(epi_column_abs_sums_np(disparity, (U, V), confidence).ravel(),
-                               [np.abs(c).sum() for c in columns], atol=1e-12)
 
 
 def test_bad_maps_are_refused(runtime):

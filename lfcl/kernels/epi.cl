@@ -25,9 +25,8 @@
 //                     that source row that land on s' (k over the offsets of sources that reach s');
 //   adjoint, v-block: target col' gathers from col' + k V - 1 (sources (t' + k, v' - 1)), lanes v' > 0.
 //
-// No atomics: the adjoint is a gather, deterministic. With `mode` 1 the adjoint writes diag(D^T D)
-// ([H, W], one channel): the squared coefficients (the taps of one row on one lens summed first); with
-// `mode` 2 the column sums of |D| (the primal-dual solver's step sizes, lfcl/solvers/epi_pd.py).
+// No atomics: the adjoint is a gather, deterministic. With `squared` the adjoint writes diag(D^T D)
+// ([H, W], one channel): the squared coefficients (the taps of one row on one lens summed first).
 // `offsets` int [4, S, 2]: per lens row, (lo, hi) of the forward u, forward v, adjoint u, adjoint v
 // offsets. Global size: (ceil(W / 16), H).
 
@@ -123,15 +122,11 @@ __kernel void epi_forward(__global const float *x, __global float *z, __global c
     for (int c = 0; c < channels; ++c) store_row(acc[c], z + (channels + c) * plane + base, col0, width);
 }
 
-// x (+)= D^T z, or with `mode` 1 / 2 x (+)= diag(D^T D) / the column sums of |D| (one [H, W] plane; z is not
-// read): the coefficient each source puts on the target, squared / absolute.
-#define COEF_TERM(coef) (mode == 1 ? (coef) * (coef) : fabs(coef))
-
+// x (+)= D^T z, or with `squared` x (+)= diag(D^T D) (one [H, W] plane; z is not read).
 __kernel void epi_adjoint(__global const float *z, __global float *x, __global const float *rays,
                           __global const int *offsets, const int height, const int width, const int channels,
-                          const int accumulate, const int mode)
+                          const int accumulate, const int squared)
 {
-    const int squared = mode != 0;
     const int col0 = 16 * get_global_id(0), row = get_global_id(1);
     if (col0 >= width || row >= height) return;
     const int S = height / PITCH_U, T = width / PITCH_V;
@@ -149,7 +144,7 @@ __kernel void epi_adjoint(__global const float *z, __global float *x, __global c
     const float16 w_u = u1 < PITCH_U - 1 ? w_own : (float16)0.0f;
     const float16 w_v = select((float16)0.0f, w_own, v_pos < PITCH_V - 1);
     if (squared) {
-        acc[0] += COEF_TERM(w_u) + COEF_TERM(w_v);
+        acc[0] += w_u * w_u + w_v * w_v;
     } else {
         for (int c = 0; c < n; ++c)
             acc[c] -= w_u * load_row(zu + c * plane + base, col0, 0, width)
@@ -165,7 +160,7 @@ __kernel void epi_adjoint(__global const float *z, __global float *x, __global c
             const float16 coef = load_row(rays + plane + source, col0, 0, width) * weight_on(&taps, (float16)(float)s1);
             if (!any_nonzero(coef)) continue;
             if (squared)
-                acc[0] += COEF_TERM(coef);
+                acc[0] += coef * coef;
             else
                 for (int c = 0; c < n; ++c) acc[c] += coef * load_row(zu + c * plane + source, col0, 0, width);
         }
@@ -181,7 +176,7 @@ __kernel void epi_adjoint(__global const float *z, __global float *x, __global c
                                     (v_pos > 0) & (t < (float)T));
         if (!any_nonzero(coef)) continue;
         if (squared)
-            acc[0] += COEF_TERM(coef);
+            acc[0] += coef * coef;
         else
             for (int c = 0; c < n; ++c) acc[c] += coef * load_row(zv + c * plane + base, col0, shift, width);
     }
@@ -311,98 +306,4 @@ __kernel void epi_zu(__global float *kx, __global float *z, __global float *u, _
               + ((r2.s8 + r2.s9) + (r2.sa + r2.sb)) + ((r2.sc + r2.sd) + (r2.se + r2.sf));
     l1[k] = ((a.s0 + a.s1) + (a.s2 + a.s3)) + ((a.s4 + a.s5) + (a.s6 + a.s7))
           + ((a.s8 + a.s9) + (a.sa + a.sb)) + ((a.sc + a.sd) + (a.se + a.sf));
-}
-
-// --- the primal-dual solver (lfcl/solvers/epi_pd.py): Chambolle-Pock with diagonal step sizes ---
-
-inline float hsum16(float16 a)
-{
-    return ((a.s0 + a.s1) + (a.s2 + a.s3)) + ((a.s4 + a.s5) + (a.s6 + a.s7))
-         + ((a.s8 + a.s9) + (a.sa + a.sb)) + ((a.sc + a.sd) + (a.se + a.sf));
-}
-
-// The dual step of one block's differences g = D x_bar ([2, 3, H, W]; chunk k of half h = id / chunks), and
-// with `cross` that of the cross-channel block on C g (C: the colour differences R - G, B - G; [2, 2, H, W]):
-//   y' = clip(y + sigma g, -lam, lam),   yx' = clip(yx + sigma_x C g, -lam_x, lam_x),   s = y' + C^T yx'
-// (s: what D^T gathers for both blocks at once). Chunk sums of ((y' - y) / sigma)^2 (and the cross block's) in
-// moved[id], of lam |g| + lam_x |C g| in l1[id]. Global size: 2 * chunks, chunks = ceil(plane / 16).
-__kernel void epi_pd_dual(__global const float *g, __global float *y, __global float *yx, __global float *s,
-                          __global float *moved, __global float *l1, const float sigma, const float lam,
-                          const float sigma_x, const float lam_x, const int cross, const ulong plane,
-                          const ulong chunks)
-{
-    const ulong id = get_global_id(0);
-    if (id >= 2 * chunks) return;
-    const ulong h = id / chunks, k = id % chunks;
-    float16 grad[3], sums[3], m2 = (float16)0.0f, a = (float16)0.0f;
-    for (int c = 0; c < 3; ++c) {
-        const size_t at = (h * 3 + c) * plane;
-        grad[c] = load_chunk(g + at, k, plane);
-        const float16 old = load_chunk(y + at, k, plane);
-        const float16 next = clamp(old + sigma * grad[c], -lam, lam);
-        store_chunk(next, y + at, k, plane);
-        const float16 step = (next - old) / sigma;
-        m2 += step * step;
-        a += lam * fabs(grad[c]);
-        sums[c] = next;
-    }
-    if (cross) {
-        const float16 diff[2] = {grad[0] - grad[1], grad[2] - grad[1]};
-        float16 next[2];
-        for (int e = 0; e < 2; ++e) {
-            const size_t at = (h * 2 + e) * plane;
-            const float16 old = load_chunk(yx + at, k, plane);
-            next[e] = clamp(old + sigma_x * diff[e], -lam_x, lam_x);
-            store_chunk(next[e], yx + at, k, plane);
-            const float16 step = (next[e] - old) / sigma_x;
-            m2 += step * step;
-            a += lam_x * fabs(diff[e]);
-        }
-        sums[0] += next[0];
-        sums[1] -= next[0] + next[1];
-        sums[2] += next[1];
-    }
-    for (int c = 0; c < 3; ++c) store_chunk(sums[c], s + (h * 3 + c) * plane, k, plane);
-    moved[id] = hsum16(m2);
-    l1[id] = hsum16(a);
-}
-
-// The primal step, runs of 16 columns: q = x - tau v (v = K^T y'), x' = the data term's prox of q,
-// (q + tau w b) / (1 + tau w) in the colour the pixel measured and q in the others, x_bar = 2 x' - x.
-// tau = 1 / (rho (a_epi m_c + a_fb)) per sample and colour: a_* the column sums of |D| of the EPI and
-// fall-back blocks, m_c = 1 + (1, 2, 1)_c with the cross block (the column sums of |C|), else 1. A sample
-// that no difference reaches (a = 0) takes its measurement, or keeps its value.
-// Per run (row * runs + run): the sums of (x' - x)^2 in change, ((x' - x) / tau)^2 in scaled and w (x' - b)^2
-// over the measured samples in misfit. Global size: (runs = ceil(W / 16), H).
-__kernel void epi_pd_primal(__global float *x, __global float *xbar, __global const float *v,
-                            __global const float *b, __global const float *a_epi, __global const float *a_fb,
-                            const int fallback, const int cross, __global const float *weight_runs,
-                            const float rho, __global float *change_sums, __global float *scaled_sums,
-                            __global float *misfit_sums, const int height, const int width, const int pattern)
-{
-    RUN_PROLOGUE
-    const float16 ae = load_row(a_epi + base, col0, 0, width);
-    const float16 af = fallback ? load_row(a_fb + base, col0, 0, width) : (float16)0.0f;
-    const float16 measured = load_row(b + base, col0, 0, width);
-    float16 change = (float16)0.0f, scaled = (float16)0.0f, misfit = (float16)0.0f;
-    for (int c = 0; c < 3; ++c) {
-        const size_t at = c * plane + base;
-        const float m = cross ? (c == 1 ? 3.0f : 2.0f) : 1.0f;
-        const float16 reach = rho * (ae * m + af);  // 1 / tau
-        const float16 w = data_weight(weight_runs, row, cols, pattern, c);
-        const float16 old = load_row(x + at, col0, 0, width);
-        const float16 q = old - load_row(v + at, col0, 0, width) / reach;
-        const float16 solved = select(select(old, measured, w > 0.0f), (reach * q + w * measured) / (reach + w),
-                                      reach > 0.0f);
-        store_row(solved, x + at, col0, width);
-        store_row(2.0f * solved - old, xbar + at, col0, width);
-        const float16 dx = solved - old, r = solved - measured;
-        change += dx * dx;
-        scaled += (dx * reach) * (dx * reach);
-        misfit += w * r * r;
-    }
-    const size_t slot = (size_t)row * ((width + 15) / 16) + get_global_id(0);
-    change_sums[slot] = hsum16(change);
-    scaled_sums[slot] = hsum16(scaled);
-    misfit_sums[slot] = hsum16(misfit);
 }

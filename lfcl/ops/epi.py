@@ -195,14 +195,6 @@ def epi_diagonal_np(disparity, pitch, confidence=None, matrix=None) -> np.ndarra
     return np.asarray(M.multiply(M).sum(axis=0)).reshape(S * U, T * V)
 
 
-def epi_column_abs_sums_np(disparity, pitch, confidence=None, matrix=None) -> np.ndarray:
-    """The column sums of |D_epi| as [H, W] (the same for every channel): the device's ``column_abs_sums``."""
-    U, V = pitch
-    S, T = np.shape(disparity)
-    M = matrix if matrix is not None else epi_matrix_np(disparity, pitch, confidence)
-    return np.asarray(abs(M).sum(axis=0)).reshape(S * U, T * V)
-
-
 def _tap_span(own, d, n):
     """Per sample, the first and last lens a tap of nonzero weight lands on (float32 p = own - d;
     only the tap at floor(p) when p is a whole number), clamped to [0, n - 1]."""
@@ -325,7 +317,7 @@ class EpiGradient:
         if accumulate and out is None:
             raise ValueError("accumulate needs an out array")
         out = output(self.runtime, out, self.planes_shape)
-        self._gather(z, out, accumulate, mode=0)
+        self._gather(z, out, accumulate, squared=False)
         return out
 
     def gram(self, x, out=None, scratch=None):
@@ -337,19 +329,10 @@ class EpiGradient:
         if accumulate and out is None:
             raise ValueError("accumulate needs an out array")
         out = output(self.runtime, out, (self.height, self.width))
-        self._gather(out, out, accumulate, mode=1)  # z is not read
+        self._gather(out, out, accumulate, squared=True)  # z is not read with squared
         return out
 
-    def column_abs_sums(self, out=None, accumulate: bool = False):
-        """The column sums of |D| as [H, W] (one plane: the same for every channel), sum_i |D_ij| for sample j:
-        the primal-dual solver's step sizes (lfcl/solvers/epi_pd.py); with ``accumulate`` added."""
-        if accumulate and out is None:
-            raise ValueError("accumulate needs an out array")
-        out = output(self.runtime, out, (self.height, self.width))
-        self._gather(out, out, accumulate, mode=2)  # z is not read
-        return out
-
-    def _gather(self, z, out, accumulate, mode):
+    def _gather(self, z, out, accumulate, squared):
         self.runtime.launch("epi", "epi_adjoint", self._grid, z.data, out.data, *self._args(),
-                            np.int32(self.channels), np.int32(bool(accumulate)), np.int32(mode),
+                            np.int32(self.channels), np.int32(bool(accumulate)), np.int32(bool(squared)),
                             defines=self._defines)
