@@ -355,9 +355,10 @@ def test_solver_refuses_what_it_cannot_do(runtime, rng):
 def test_method_admm_epi_runs_and_records_the_disparity(runtime, rng):
     """lfcl.demosaic.methods: admm-epi estimates the disparity from the raw (lfcl.depth), solves, and says what it used."""
     from lfcl.demosaic.driver import demosaic_grid
+    from lfcl.depth.estimate import DEFAULTS
     from lfcl.grid.model import AlignedGrid
     from lfcl.noise.model import NoiseEstimate
-    from lfcl.solvers.epi import epi_setting
+    from lfcl.solvers.epi import EPI_DEPTH_OPTIONS, epi_setting
 
     S, T, U, V = 10, 10, 9, 9
     b, _, truth = plane_scene_mosaic(rng, S, T, U, V, disparity=0.5, noise=0.01)
@@ -369,6 +370,9 @@ def test_method_admm_epi_runs_and_records_the_disparity(runtime, rng):
     assert result.parameters["lam_fb"] == pytest.approx(setting.fb_per_lam * setting.lam_per_sigma * 0.01)
     assert result.parameters["start"] == setting.start
     assert result.parameters["disparity"]["median"] == pytest.approx(0.5, abs=0.1)
+    # every option of the estimate is written down, its own defaults with admm-epi's changes over them
+    assert result.parameters["disparity"]["options"] == {**DEFAULTS, **EPI_DEPTH_OPTIONS}
+    assert result.parameters["disparity"]["options"]["occlusion"] is True
     assert 2 <= result.iterations <= setting.iterations
     assert result.parameters["change_tol"] == pytest.approx(setting.change_per_sigma * 0.01)
     assert result.parameters["max_iter"] == setting.iterations

@@ -600,7 +600,7 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
             "mean": float(d.mean()), "median": float(np.median(d)), "std": float(d.std()),
             "confidence_mean": float(w.mean()), "confident_share": float(np.mean(w >= 0.5)),
             "search_range": [-depth.dmax, depth.dmax], "step": depth.step, "seconds": depth_seconds,
-            "options": dict(EPI_DEPTH_OPTIONS if depth_options is None else depth_options),
+            "options": dict(depth.options),  # every option of the estimate, its defaults included
             "lookup": "d and confidence read at the lens the ray sees in the centre view",
         },
     }
