@@ -32,7 +32,7 @@ def main():
                     got = scores(result.planes, cap.truth)
                     rows[step].append((got["psnr_center"] - malvar["psnr_center"],
                                        got["psnr_mean"] - malvar["psnr_mean"], result.seconds,
-                                       result.parameters["disparity"]["seconds"]))
+                                       result.part_seconds["disparity"]))
     for step, values in rows.items():
         v = np.array(values)
         print(f"step {step:g}: centre gain mean {v[:, 0].mean():+.3f} worst {v[:, 0].min():+.3f} dB, mean image mean "

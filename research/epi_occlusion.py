@@ -51,7 +51,7 @@ def run(args) -> list[dict]:
             result = demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), "admm-epi", noise=noise)
             got = scores(result.planes, cap.truth)
             row[name] = [got["psnr_center"], got["psnr_mean"], result.seconds,
-                         result.parameters["disparity"]["seconds"]]
+                         result.part_seconds["disparity"]]
         epi.EPI_DEPTH_OPTIONS = shipped
         rows.append(row)
         print(scene, seed, lux, "  ".join(

@@ -65,7 +65,7 @@ def make_rows(args) -> list[dict]:
                 method, strength, start = parse_candidate(name)
                 began = time.perf_counter()
                 result = run_method(capture, method, strength=strength,
-                                    **({"start": start} if start != "malvar" else {}))
+                                    **({"start": start} if start not in ("malvar", None) else {}))
                 row["gains"][name] = {"center": result["psnr_center"] - malvar["psnr_center"],
                                       "mean": result["psnr_mean"] - malvar["psnr_mean"],
                                       "seconds": time.perf_counter() - began}

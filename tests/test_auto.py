@@ -54,6 +54,8 @@ def test_parse_candidate():
     assert parse_candidate("admm-uv@0.5") == ("admm-uv", 0.5, "malvar")
     assert parse_candidate("malvar") == ("malvar", 1.0, "malvar")
     assert parse_candidate("admm-uv-xc@2:linear4d") == ("admm-uv-xc", 2.0, "linear4d")
+    assert parse_candidate("admm-epi@1") == ("admm-epi", 1.0, None)  # its schedule's start, as the rows ran it
+    assert parse_candidate("admm-epi@1:malvar") == ("admm-epi", 1.0, "malvar")
     assert parse_candidate("admm-uv-xc:guarded") == ("admm-uv-xc", 1.0, "guarded")
     # the method and its start are lfcl.demosaic.names.parse_method_spec's METHOD[:START]; @strength a number > 0
     for bad, words in (("admm-uv@1:nearest", "unknown start 'nearest' in method 'admm-uv:nearest': expected "
@@ -81,6 +83,22 @@ def test_fit_rule_takes_the_best_worst_case_and_breaks_ties_by_the_median():
     # where every candidate loses more than the tie margin, Malvar is the pick
     losing = [_row(0.005, {"admm-uv@1": (-1.0, 0.2), "admm-uvst@1": (0.4, -0.3)})]
     assert fit_rule(losing, "both")[0]["candidate"] == "malvar"
+
+
+@pytest.mark.parametrize("epi_worst, taken", [(1.49, False), (1.51, True)])
+def test_a_costly_candidate_takes_a_band_only_by_the_margin_over_the_cheap_pick(epi_worst, taken):
+    rows = [_row(0.005, {"admm-uv@1": (2.0, 0.5), "admm-epi@1": (epi_worst + 1.0, epi_worst)}),
+            _row(0.0051, {"admm-uv@1": (3.0, 0.6), "admm-epi@1": (epi_worst + 2.0, epi_worst + 0.5)})]
+    (band,) = fit_rule(rows, "both")  # worst cases: admm-uv +0.5, admm-epi epi_worst; the margin is 1 dB
+    assert band["candidate"] == ("admm-epi@1" if taken else "admm-uv@1")
+    assert band["cheap_pick"] == {"candidate": "admm-uv@1", "worst_gain_db": pytest.approx(0.5),
+                                  "median_gain_db": pytest.approx(1.525)}  # (1.25 + 1.8) / 2
+    assert band["costly_margin_db"] == 1.0
+    # without the margin the costly candidate wins on its worst case, as any other would
+    assert fit_rule(rows, "both", margin_db=0.0)[0]["candidate"] == "admm-epi@1"
+    # rows without a costly candidate fit as before, with no cheap pick recorded
+    cheap = [{**r, "gains": {"admm-uv@1": r["gains"]["admm-uv@1"]}} for r in rows]
+    assert "cheap_pick" not in fit_rule(cheap, "both")[0]
 
 
 def test_fit_rule_bands_are_contiguous_and_merge_equal_neighbours():
@@ -166,6 +184,23 @@ def test_auto_runs_the_chosen_method_and_records_why(rng):
     assert auto.method == choice.method and auto.parameters["start"] == choice.start
     assert auto.parameters["auto"]["method"] == choice.method and "sigma 0.004" in auto.parameters["auto"]["reason"]
     np.testing.assert_array_equal(auto.planes, direct.planes)
+
+
+def test_auto_at_low_light_runs_admm_epi_from_its_own_start(rng):
+    """The shipped rule's low-light bands hold admm-epi (docs/auto.md); it runs as it ran for the rule's rows:
+    from its schedule's start (guarded), not from Malvar."""
+    from lfcl.solvers.epi import epi_start
+
+    mosaic = (0.3 + 0.02 * rng.standard_normal((36, 36))).astype(np.float32)
+    noise = NoiseEstimate(gain=0.0, floor=0.0015**2, sigma=0.0015, source="test")
+    choice = choose(0.0015)
+    assert (choice.method, choice.start) == ("admm-epi", None)
+    auto = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "auto", noise=noise)
+    direct = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-epi", noise=noise)
+    assert auto.method == "admm-epi" and auto.parameters["start"] == epi_start(0.0015, (9, 9))[0] == "guarded"
+    np.testing.assert_array_equal(auto.planes, direct.planes)
+    # where admm-epi costs more than it gains over the cheap pick, the cheap pick stays
+    assert choose(0.009).method != "admm-epi" and choose(0.009, view="center").method != "admm-epi"
 
 
 

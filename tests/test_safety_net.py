@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from lfcl.demosaic.driver import demosaic_grid
 from lfcl.demosaic.names import DEFAULT_METHOD
-from lfcl.demosaic.safety_net import NET_K
+from lfcl.demosaic.safety_net import NET_K, net_k
 from lfcl.grid.model import AlignedGrid
 from lfcl.noise.model import NoiseEstimate
 from lfcl.ops.lensguard import guard_lens_means_np
@@ -41,7 +43,12 @@ def test_with_the_net_no_view_is_worse_than_malvar(finetexture, lux, method):
     centre, mean, result = _gains(finetexture[lux], method)
     assert centre >= -0.1 and mean >= -0.1, (centre, mean)
     net = result["parameters"]["safety_net"]
-    assert net["k"] == NET_K and 0 < net["lenses_from_malvar"] <= net["lenses"] == 24 * 24
+    ran = result["parameters"].get("auto", {}).get("method", method)
+    assert net["k"] == net_k(ran)
+    if ran == "admm-epi":  # auto's pick in low light keeps its own lens means (docs/auto.md)
+        assert net["k"] == math.inf and net["lenses"] == net["lenses_from_malvar"] == 0 and "not applied" in net["why"]
+    else:
+        assert net["k"] == NET_K and 0 < net["lenses_from_malvar"] <= net["lenses"] == 24 * 24
 
 
 def test_the_net_is_the_lens_mean_guard_against_malvar_of_the_same_mosaic(rng):
@@ -94,11 +101,16 @@ def test_process_summary_says_what_the_net_did(tmp_path):
     assert CliRunner().invoke(cli, ["simulate", "--scene", "finetexture", "--lenses", "12x12", "--seed", "1",
                                     "-o", str(capture)]).exit_code == 0
     base = ["process", str(capture / "raw.dng"), "--pitch", "9", "--outputs", "center", "--no-previews"]
-    text = CliRunner().invoke(cli, [*base, "-o", str(tmp_path / "text")])
+    text = CliRunner().invoke(cli, [*base, "--method", "admm-uv-xc", "-o", str(tmp_path / "text")])
     assert text.exit_code == 0, text.output
     assert "safety net: " in text.output and "lenses took Malvar's colour means" in text.output
     summary = json.loads((tmp_path / "text" / "summary.json").read_text())
-    assert summary["method"] == DEFAULT_METHOD and summary["parameters"]["safety_net"]["lenses"] == 144
+    assert summary["method"] == "admm-uv-xc" and summary["parameters"]["safety_net"]["lenses"] == 144
+    # the default writing only the centre view at 12 lux runs admm-epi, which keeps its own lens means, and says so
+    default = CliRunner().invoke(cli, [*base, "-o", str(tmp_path / "default")])
+    assert default.exit_code == 0, default.output
+    assert "method auto -> admm-epi" in default.output and "safety net: not applied" in default.output
+    assert "disparity" in json.loads((tmp_path / "default" / "summary.json").read_text())["seconds"]
     # where the noise model came from (docs/noise.md): the simulated DNG carries a NoiseProfile
     assert "noise: sigma " in text.output and "(the DNG's noise profile)" in text.output
     assert summary["noise"]["source"] == "dng-noise-profile" and summary["noise"]["sigma"] == summary["noise_sigma"]

@@ -7,8 +7,10 @@ fitted by research/fit_auto.py on training captures only (charts, deadleaves and
 runs it (the safety net on). In each band it holds the candidate (method, lambda strength) of the best
 *worst-case* PSNR gain over Malvar on those captures, and among those within ``TIE_DB`` of it the one
 of the largest median gain (:func:`fit_rule`): Malvar is a candidate, so a pick is never more than
-``TIE_DB`` below Malvar on its training captures ("never worse than Malvar", docs/auto.md). A sigma
-outside the trained range takes the nearest band, and the reason says so.
+``TIE_DB`` below Malvar on its training captures ("never worse than Malvar", docs/auto.md). A costly method
+(``COSTLY_METHODS``: admm-epi) takes a band only where its worst-case gain beats the cheap pick's by
+``COSTLY_MARGIN_DB``: in low light (docs/auto.md, "admm-epi at low light"). A sigma outside the trained range
+takes the nearest band, and the reason says so.
 
 The gains can be judged on both views (the lower of the two, the default) or on one of them: the
 file holds a rule for each (``VIEWS``), and a run that writes only the centre view, or only the mean
@@ -49,6 +51,15 @@ VIEW_WORDS = {"both": "centre view or mean image, whichever is worse", "center":
 #: worst case are ranked by their median gain.
 BANDS_PER_DECADE = 4
 TIE_DB = 0.1
+#: Methods that cost a multiple of the others' time: admm-epi took 18.5x admm-uv's demosaic stage at 500x500
+#: lenses on 2 CPU cores (BENCHMARKS.md). A costly candidate takes a band only where its worst-case gain over
+#: Malvar beats the best cheap candidate's by COSTLY_MARGIN_DB (issue 20's margin over today's best method at
+#: low light), so that the time buys a gain on every training capture of the band, not on average.
+COSTLY_METHODS = ("admm-epi",)
+COSTLY_MARGIN_DB = 1.0
+#: Methods whose start, where a candidate names none, is their own rule's rather than Malvar: admm-epi's follows
+#: its schedule (lfcl/solvers/epi.py epi_start), as research/fit_auto.py ran it.
+OWN_START_METHODS = ("admm-epi",)
 #: Outputs that the mean image speaks for: a refocused image is a shifted mean over the views.
 MEAN_LIKE_OUTPUTS = frozenset({"mean", "refocus"})
 
@@ -73,7 +84,7 @@ class AutoChoice:
     strength: float
     sigma: float
     reason: str
-    start: str = "malvar"  # the ADMM methods' first estimate (lfcl.demosaic.methods.STARTS)
+    start: str | None = "malvar"  # the ADMM methods' first estimate (lfcl.demosaic.methods.STARTS); None: the method's own
     # the raw's cross-lens ratio (lfcl/demosaic/lens_ratio.py; None: not measured or not significant) and
     # whether the band's training captures spanned it (None: unknown)
     lens_ratio: float | None = None
@@ -159,10 +170,38 @@ def _band(rows: list[dict], lo: float, hi: float, view: str, tie_db: float, pick
             "lens_ratio_range": [min(ratios), max(ratios)] if ratios else None}
 
 
-def fit_rule(rows: list[dict], view: str, tie_db: float = TIE_DB) -> list[dict]:
+def is_costly(candidate: str) -> bool:
+    return candidate != "malvar" and parse_candidate(candidate)[0] in COSTLY_METHODS
+
+
+def _pick(rows: list[dict], lo: float, hi: float, view: str, tie_db: float, margin_db: float,
+          pick: str | None = None) -> dict:
+    """The band of :func:`fit_rule` over ``rows`` (``pick``, or the pick among the cheap candidates unless a
+    costly one, :data:`COSTLY_METHODS`, beats that pick's worst-case gain by ``margin_db``), with the cheap pick
+    recorded."""
+    band = _band(rows, lo, hi, view, tie_db)
+    costly = sorted(c for c in band["worst_gains_db"] if is_costly(c))
+    if not costly:
+        return band if pick is None else _band(rows, lo, hi, view, tie_db, pick)
+    cheap_rows = [{**r, "gains": {c: g for c, g in r["gains"].items() if not is_costly(c)}} for r in rows]
+    cheap = _band(cheap_rows, lo, hi, view, tie_db)
+    if pick is None:
+        best = max(costly, key=lambda c: (band["worst_gains_db"][c], band["median_gains_db"][c]))
+        pick = best if band["worst_gains_db"][best] >= cheap["worst_gain_db"] + margin_db else cheap["candidate"]
+    band = _band(rows, lo, hi, view, tie_db, pick)
+    band["cheap_pick"] = {"candidate": cheap["candidate"], "worst_gain_db": cheap["worst_gain_db"],
+                          "median_gain_db": cheap["median_gain_db"]}
+    band["costly_margin_db"] = margin_db
+    return band
+
+
+def fit_rule(rows: list[dict], view: str, tie_db: float = TIE_DB, margin_db: float = COSTLY_MARGIN_DB
+             ) -> list[dict]:
     """The sigma bands of ``rows`` (research/fit_auto.py) with, in each, the candidate of the best worst-case
     gain over Malvar on ``view``; among those within ``tie_db`` of it, the one of the largest median
-    :func:`row_merit` (the gain; for ``both`` the mean of the two views' gains).
+    :func:`row_merit` (the gain; for ``both`` the mean of the two views' gains). Costly candidates
+    (:data:`COSTLY_METHODS`) are left out of that choice, and take the band instead only where their worst-case
+    gain is at least ``margin_db`` above the cheap pick's.
 
     Malvar is a candidate (gain 0), so no band's pick is more than ``tie_db`` worse than Malvar on any
     of its training captures. Neighbouring bands with the same pick are merged.
@@ -173,36 +212,39 @@ def fit_rule(rows: list[dict], view: str, tie_db: float = TIE_DB) -> list[dict]:
         inside = [r for r in rows if lo <= r["sigma"] < hi]
         if not inside:
             continue
-        band = _band(inside, lo, hi, view, tie_db)
+        band = _pick(inside, lo, hi, view, tie_db, margin_db)
         if bands and bands[-1]["candidate"] == band["candidate"]:
             lo = bands.pop()["sigma_from"]
-            band = _band([r for r in rows if lo <= r["sigma"] < hi], lo, hi, view, tie_db, band["candidate"])
+            band = _pick([r for r in rows if lo <= r["sigma"] < hi], lo, hi, view, tie_db, margin_db,
+                         band["candidate"])
         bands.append(band)
     return bands
 
 
-def fit_rules(rows: list[dict], tie_db: float = TIE_DB) -> dict:
+def fit_rules(rows: list[dict], tie_db: float = TIE_DB, margin_db: float = COSTLY_MARGIN_DB) -> dict:
     """The rule file's contents from research/fit_auto.py's rows: a rule per view, over every training capture.
 
     One rule for all content: a class of its own for content like the real light fields (cross-lens ratio
     below 2.6: of the training captures only finetexture, two a level) picked admm-uv-xc at strength 2 in
     one band, 1.9 dB below Malvar on the held-out Lytro frame at 12 lux (docs/auto.md), so it went.
     """
-    rules = {view: fit_rule(rows, view, tie_db) for view in VIEWS}
+    rules = {view: fit_rule(rows, view, tie_db, margin_db) for view in VIEWS}
     return {"criterion": "per sigma band, the candidate of the best worst-case PSNR gain over Malvar on the "
                          f"training captures (lower of centre view and mean image for 'both'); within {tie_db:g} "
-                         "dB of it, the largest median gain",
+                         f"dB of it, the largest median gain; a costly method ({', '.join(COSTLY_METHODS)}) only "
+                         f"where its worst-case gain beats the cheap pick's by {margin_db:g} dB",
             "captures": sorted({r["capture"] for r in rows}),
             "rules": rules}
 
 
-def parse_candidate(name: str) -> tuple[str, float, str]:
+def parse_candidate(name: str) -> tuple[str, float, str | None]:
     """'method[@strength][:start]' -> (method, strength, start): the method and its start are
     lfcl.demosaic.names.parse_method_spec's ``METHOD[:START]`` (checked there), ``@strength`` multiplies the
     default lambda.
 
     'admm-uv@2' -> ('admm-uv', 2.0, 'malvar'); 'admm-uv-xc@1:linear4d' -> ('admm-uv-xc', 1.0, 'linear4d');
-    'malvar' -> ('malvar', 1.0, 'malvar').
+    'malvar' -> ('malvar', 1.0, 'malvar'); 'admm-epi@1' -> ('admm-epi', 1.0, None): without a start, the
+    methods of :data:`OWN_START_METHODS` take their own.
     """
     head, colon, start = name.partition(":")
     method, at, strength = head.partition("@")
@@ -213,7 +255,7 @@ def parse_candidate(name: str) -> tuple[str, float, str]:
         value = math.nan
     if not (math.isfinite(value) and value > 0):
         raise ValueError(f"candidate {name!r}: the strength after @ must be a number > 0, got {strength!r}")
-    return method, value, start or "malvar"
+    return method, value, start or (None if method in OWN_START_METHODS else "malvar")
 
 
 def band_for(sigma: float, rule=None, view: str = "both") -> tuple[dict, str]:
@@ -273,10 +315,17 @@ def choose(sigma: float, rule=None, lens_ratio: float | None = None, view: str =
             raise ValueError(f"the auto rule holds no rule for view {view!r}: refit it with research/fit_auto.py")
     band, where = band_for(sigma, rule)
     method, strength, start = parse_candidate(band["candidate"])
+    cheap = band.get("cheap_pick")
+    if cheap is not None and is_costly(band["candidate"]):
+        why = (f"{band['candidate']}'s worst-case PSNR gain over Malvar ({VIEW_WORDS[view]}) beat the cheaper "
+               f"methods' best, {cheap['candidate']}'s {cheap['worst_gain_db']:+.2f} dB, by at least "
+               f"{band['costly_margin_db']:g} dB")
+    else:
+        why = (f"{band['candidate']} had the best worst-case PSNR gain over Malvar ({VIEW_WORDS[view]}), within "
+               f"{band['tie_db']:g} dB, and the largest median gain")
     reason = (f"sigma {sigma:.3g} {where} {band['sigma_from']:.3g}-{band['sigma_to']:.3g}: on its "
-              f"{band['captures']} training captures {band['candidate']} had the best worst-case PSNR gain over "
-              f"Malvar ({VIEW_WORDS[view]}), within {band['tie_db']:g} dB, and the largest median gain "
-              f"({band['worst_gain_db']:+.2f} dB worst, {band['median_gain_db']:+.2f} dB median)")
+              f"{band['captures']} training captures {why} ({band['worst_gain_db']:+.2f} dB worst, "
+              f"{band['median_gain_db']:+.2f} dB median)")
     seen = None
     trained = band.get("lens_ratio_range")
     if lens_ratio is not None and trained:

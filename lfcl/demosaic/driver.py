@@ -38,7 +38,7 @@ class AutoResolution:
 
     method: str
     strength: float  # multiplies the caller's strength
-    start: str  # the ADMM start the rule names (a start the caller gives wins)
+    start: str | None  # the ADMM start the rule names (None: the method's own; a start the caller gives wins)
     noise: NoiseEstimate  # the raw's noise model the choice was made at (the solver uses it too)
     record: dict  # parameters["auto"]: lfcl.demosaic.auto.AutoChoice.as_dict() (+ "replaced" when it fell back)
 
@@ -75,7 +75,7 @@ def resolve_auto(mosaic: np.ndarray, pattern: str, grid, *, noise: NoiseEstimate
         sigma = noise.sigma_at(measured(grid.sampling, mosaic)[1])
     choice = auto.choose(sigma, lens_ratio=lens_ratio, view=view)
     ran, replaced = choice, None
-    if choice.method not in grid.methods or choice.start not in grid.starts:
+    if choice.method not in grid.methods or (choice.start is not None and choice.start not in grid.starts):
         what = choice.method if choice.method not in grid.methods else f"{choice.method} from a {choice.start} start"
         ran, replaced = auto.replacement(choice, f"{what} does not run on {grid.kind} lens grids",
                                          auto.AUTO_FALLBACK, 1.0)

@@ -166,6 +166,7 @@ class DemosaicResult:
     shape: LightFieldShape | None = None
     sampling: object = None  # lfcl.grid.resampling.SamplingModel of a resampled grid
     device: object = None  # the device it ran on (lfcl.device.get_runtime's spec), which also lays out the light field
+    part_seconds: dict = dataclasses.field(default_factory=dict)  # parts of ``seconds`` timed apart (admm-epi: disparity)
 
     @functools.cached_property
     def lightfield(self) -> np.ndarray:
@@ -372,15 +373,15 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
             params, lam_fb = epi_params(params, sigma, lam=lam, iterations=iterations, strength=strength)
         else:
             lam_fb = params.lam * defaults.fb_per_sigma / defaults.lam_per_sigma
-        planes, extra, run = demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params, lam_fb, noise,
-                                          device, lens_weights, callback, max_memory)
+        planes, extra, run, depth_seconds = demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params,
+                                                         lam_fb, noise, device, lens_weights, callback, max_memory)
         parameters = {**dataclasses.asdict(params), "start": start, **extra}
         if epi_start_replaced is not None:
             parameters["start_replaced"] = epi_start_replaced
         if guard is not None:
             parameters["start_guard"] = guard
         return DemosaicResult(planes, method, parameters, run.iterations, time.perf_counter() - began,
-                              run.stop_reason, run.history_rows(), noise)
+                              run.stop_reason, run.history_rows(), noise, part_seconds={"disparity": depth_seconds})
     budget = int(max_memory) if max_memory is not None else int(0.8 * runtime.device.global_mem_size)
     needed = solver_bytes((H, W), dims, exact=dims == "uv", cross_channel=params.cross_channel)
     largest = solver_largest_buffer((H, W), dims)

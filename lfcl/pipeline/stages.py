@@ -437,7 +437,7 @@ class Pipeline:
     input, ...), ``lenses``, ``options`` (every stage's options, defaults included),
     ``seconds`` (per stage: ``decode``, ``grid``, ``demosaic``, ``outputs``, and
     ``calibrate`` when the grid came from a white image; ``grid`` is then the rest of that
-    stage), and with an Outputs stage ``format``, ``previews``, ``colour``, ``outputs``,
+    stage; likewise ``disparity`` apart from ``demosaic`` for admm-epi), and with an Outputs stage ``format``, ``previews``, ``colour``, ``outputs``,
     ``refocus``, ``skipped`` (with ``auto``: also the candidates it skipped, lfcl/demosaic/auto_report.py),
     ``output_seconds``. With an Outputs stage the summary is also
     written as ``summary.json``, last, with the other files: all of them or none.
@@ -480,6 +480,9 @@ class Pipeline:
             seconds["calibrate"] = gridded.seconds["calibrate"]
             seconds["grid"] = max(0.0, seconds["grid"] - seconds["calibrate"])
         demosaiced = timed(demosaic, gridded)
+        for part, spent in demosaiced.result.part_seconds.items():  # e.g. admm-epi's disparity, reported apart
+            seconds[part] = spent
+            seconds["demosaic"] = max(0.0, seconds["demosaic"] - spent)
         self.lightfield = demosaiced.lightfield
         metadata = demosaiced.metadata if outputs is None else outputs.file_metadata(demosaiced)
         summary = {**metadata, "lenses": list(demosaiced.lightfield.shape[:2]), "options": self.options()}

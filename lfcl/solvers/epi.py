@@ -551,7 +551,7 @@ def admm_epi_reference(b, pattern, pitch, params: AdmmParams, x0, prior: EpiPrio
 
 def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: AdmmParams, lam_fb: float, noise,
                  device=None, lens_weights=None, callback=None, max_memory: int | None = None,
-                 depth_options: dict | None = None) -> tuple[np.ndarray, dict, AdmmResult]:
+                 depth_options: dict | None = None) -> tuple[np.ndarray, dict, AdmmResult, float]:
     """``admm-epi`` of lfcl.demosaic.methods.solve_aligned: estimate the disparity from the raw
     (lfcl.depth.estimate_disparity), then solve from the start ``x0`` (device arrays ``b``, ``x0``).
 
@@ -560,7 +560,8 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     rule; only the band's own rows are kept (docs/admm.md, "admm-epi in bands").
 
     Returns the planes [3, H, W] on the host, the parameters to record (the disparity's
-    statistics, lam_fb, the bands) and the solver's runs (:class:`BandedResult`, their x dropped).
+    statistics, lam_fb, the bands), the solver's runs (:class:`BandedResult`, their x dropped) and the seconds the
+    disparity took (apart from the parameters, so that the same raw and options record the same parameters).
     """
     import time
 
@@ -599,14 +600,14 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
             "units": "lenses per view step", "min": float(d.min()), "max": float(d.max()),
             "mean": float(d.mean()), "median": float(np.median(d)), "std": float(d.std()),
             "confidence_mean": float(w.mean()), "confident_share": float(np.mean(w >= 0.5)),
-            "search_range": [-depth.dmax, depth.dmax], "step": depth.step, "seconds": depth_seconds,
+            "search_range": [-depth.dmax, depth.dmax], "step": depth.step,
             "options": dict(depth.options),  # every option of the estimate, its defaults included
             "lookup": "d and confidence read at the lens the ray sees in the centre view",
         },
     }
     if len(bands) > 1:
         parameters["bands"] = {"lens_rows": [s1 - s0 for s0, s1, _, _ in bands], "halo_lens_rows": halo}
-    return planes, parameters, result
+    return planes, parameters, result, depth_seconds
 
 
 #: admm-epi's default solver memory on a CPU device, whose "device memory" is the host's: at the paper's

@@ -247,14 +247,14 @@ def _check_method_for_calibration(method: str, calibration, start: str | None = 
 def process_summary(summary: dict) -> dict:
     """The Pipeline's summary with `lfcl process`'s timing keys (docs/outputs.md): ``decode`` (reading
     the raw and cutting it to whole lenses), ``calibrate`` (with ``--white``: the whole grid step),
-    ``demosaic``, ``outputs``."""
+    ``disparity`` (admm-epi's estimate), ``demosaic`` (the rest of that stage), ``outputs``."""
     seconds = dict(summary["seconds"])
     grid = seconds.pop("grid", 0.0)
     if "calibrate" in seconds:
         seconds["calibrate"] += grid
     else:
         seconds["decode"] = seconds.get("decode", 0.0) + grid
-    order = ("decode", "calibrate", "demosaic", "outputs")
+    order = ("decode", "calibrate", "disparity", "demosaic", "outputs")
     summary["seconds"] = {k: seconds[k] for k in order if k in seconds}
     return summary
 
