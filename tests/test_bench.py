@@ -208,3 +208,35 @@ def test_bench_api_times_the_public_call_against_its_peer():
         report["colour_demosaicing_lightfield_seconds"] / report["lfcl_lightfield_seconds"])
     bad = _invoke(["bench", "api", "--size", "64x96", "--repeats", "1"])
     assert bad.exit_code != 0 and "whole 9x9 lenses" in bad.output
+
+
+def test_bench_process_times_lfcl_process_per_method_against_its_peer(tmp_path):
+    """Each method through `lfcl process` in its own process; its centre view scored against the truth as an
+    independent path scores the same method (lfcl.lightfield), the ratios against the peer of the same run."""
+    import numpy as np
+
+    import lfcl
+    from lfcl.evaluation.metrics import psnr
+    from lfcl.sim import simulate, write_capture
+
+    capture = write_capture(simulate("charts", lenses=(12, 14), lux=2.0, seed=3), tmp_path / "capture")
+    result = _invoke(["bench", "process", str(capture), "--methods", "malvar,admm-uv", "--peer", "admm-uv",
+                      "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.stdout)
+    rows = {r["method"]: r for r in report["rows"]}
+    assert [r["method"] for r in report["rows"]] == ["admm-uv", "malvar"] and report["peer"] == "admm-uv"
+    for row in rows.values():
+        assert row["wall_seconds"] > row["demosaic_seconds"] > 0 and 0.01 < row["peak_rss_gb"] < 64
+        assert row["wall_ratio"] == pytest.approx(row["wall_seconds"] / rows["admm-uv"]["wall_seconds"])
+        assert row["demosaic_ratio"] == pytest.approx(row["demosaic_seconds"] / rows["admm-uv"]["demosaic_seconds"])
+    truth = np.load(capture / "truth.npy")
+    field = lfcl.lightfield(str(capture / "raw.dng"), pitch=9, method="malvar")
+    assert rows["malvar"]["psnr_center"] == pytest.approx(psnr(field[:, :, 4, 4], truth[:, :, 4, 4]), abs=1e-3)
+    assert rows["malvar"]["iterations"] == 0 and rows["admm-uv"]["iterations"] >= 1
+    bad = _invoke(["bench", "process", str(capture), "--methods", "admm-nope"])
+    assert bad.exit_code == 1 and "unknown method" in bad.output
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    missing = _invoke(["bench", "process", str(empty)])
+    assert missing.exit_code == 1 and "holds no raw.dng" in missing.output

@@ -137,6 +137,48 @@ def admm_command(capture_dir, lenses, lux, scene, methods, iterations, cg_steps,
     click.echo(json.dumps(report, indent=2) if as_json else pareto.format_admm(report))
 
 
+@command.command("process")
+@capture_source
+@click.option("--seed", type=int, default=5, show_default=True, help="Seed of the in-memory simulation.")
+@click.option("--methods", default="auto,admm-epi", show_default=True,
+              help="Methods to time, each METHOD[:START] as lfcl process --method takes it.")
+@click.option("--peer", default="admm-uv", show_default=True, help="The method the times are divided by.")
+@click.option("--outputs", default="center", show_default=True, metavar="KIND,...",
+              help="What each run writes (lfcl process --outputs; auto's choice depends on it), the centre view among "
+                   "them.")
+@click.option("--repeats", type=int, default=1, show_default=True, help="Runs per method (median).")
+@click.option("--json", "as_json", is_flag=True, help="Print the results as JSON instead of a table.")
+@device_option
+@user_errors
+def process_command(capture_dir, lenses, lux, scene, seed, methods, peer, outputs, repeats, as_json, device):
+    """`lfcl process` end to end per method: seconds and peak memory, as ratios against a peer method."""
+    import tempfile
+
+    import numpy as np
+
+    from ...bench import process
+    from ...bench.timing import parse_size
+
+    method_list = [m.strip() for m in methods.split(",") if m.strip()]
+    progress = None if as_json else (lambda label: click.echo(f"  {label} ...", err=True))
+    with tempfile.TemporaryDirectory(prefix="lfcl_bench_capture_") as tmp:
+        label = str(capture_dir)
+        if capture_dir is None:  # the scene simulated into a temporary capture folder
+            from ...sim import simulate, write_capture
+
+            size = parse_size(lenses, "--lenses")
+            capture_dir = write_capture(simulate(scene, lenses=size, lux=lux, seed=seed), Path(tmp) / "capture")
+            label = f"{scene}, {size[0]}x{size[1]} lenses, {lux:g} lux, seed {seed}"
+        raw, truth_file, meta_file = (capture_dir / n for n in ("raw.dng", "truth.npy", "meta.json"))
+        if not raw.is_file():
+            raise ValueError(f"{capture_dir} holds no raw.dng (a folder of `lfcl simulate`)")
+        pitch = int(json.loads(meta_file.read_text()).get("pitch", [9])[0]) if meta_file.is_file() else 9
+        truth = np.load(truth_file) if truth_file.is_file() else None
+        report = process.run(raw, method_list, peer, pitch=pitch, truth=truth, repeats=repeats, device=device,
+                             progress=progress, label=label, outputs=outputs)
+    click.echo(json.dumps(report, indent=2) if as_json else process.format_report(report))
+
+
 @command.command("stress")
 @click.option("--lenses", default="8x8", show_default=True, metavar="SxT",
               help="Lens array of the simulated scenes (9x9 pixels a lens); the shape cases add 1x1, 1xT, Sx1 and 3x5.")
