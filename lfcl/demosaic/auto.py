@@ -51,8 +51,8 @@ VIEW_WORDS = {"both": "centre view or mean image, whichever is worse", "center":
 #: worst case are ranked by their median gain.
 BANDS_PER_DECADE = 4
 TIE_DB = 0.1
-#: Methods that cost a multiple of the others' time: admm-epi took 18.5x admm-uv's demosaic stage at 500x500
-#: lenses on 2 CPU cores (BENCHMARKS.md). A costly candidate takes a band only where its worst-case gain over
+#: Methods that cost a multiple of the others' time: admm-epi took 9.6-12.4x admm-uv's time end to end at 500x500
+#: lenses on 2 CPU cores (`lfcl bench process`, BENCHMARKS.md). A costly candidate takes a band only where its worst-case gain over
 #: Malvar beats the best cheap candidate's by COSTLY_MARGIN_DB (issue 20's margin over today's best method at
 #: low light), so that the time buys a gain on every training capture of the band, not on average.
 COSTLY_METHODS = ("admm-epi",)
