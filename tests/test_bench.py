@@ -220,12 +220,15 @@ def test_bench_process_times_lfcl_process_per_method_against_its_peer(tmp_path):
     from lfcl.sim import simulate, write_capture
 
     capture = write_capture(simulate("charts", lenses=(12, 14), lux=2.0, seed=3), tmp_path / "capture")
-    result = _invoke(["bench", "process", str(capture), "--methods", "malvar,admm-uv", "--peer", "admm-uv",
+    result = _invoke(["bench", "process", str(capture), "--methods", "malvar,admm-epi", "--peer", "admm-uv",
                       "--json"])
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
     rows = {r["method"]: r for r in report["rows"]}
-    assert [r["method"] for r in report["rows"]] == ["admm-uv", "malvar"] and report["peer"] == "admm-uv"
+    assert [r["method"] for r in report["rows"]] == ["admm-uv", "malvar", "admm-epi"] and report["peer"] == "admm-uv"
+    # admm-epi's disparity is reported apart by lfcl process; the demosaic stage counts it
+    assert 0 < rows["admm-epi"]["disparity_seconds"] < rows["admm-epi"]["demosaic_seconds"]
+    assert rows["malvar"]["disparity_seconds"] == rows["admm-uv"]["disparity_seconds"] == 0
     for row in rows.values():
         assert row["wall_seconds"] > row["demosaic_seconds"] > 0 and 0.01 < row["peak_rss_gb"] < 64
         assert row["wall_ratio"] == pytest.approx(row["wall_seconds"] / rows["admm-uv"]["wall_seconds"])
