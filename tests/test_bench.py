@@ -242,4 +242,4 @@ def test_bench_process_times_lfcl_process_per_method_against_its_peer(tmp_path):
     empty = tmp_path / "empty"
     empty.mkdir()
     missing = _invoke(["bench", "process", str(empty)])
-    assert missing.exit_code == 1 and "holds no raw.dng" in missing.output
+    assert missing.exit_code == 1 and "raw.dng is missing" in missing.output

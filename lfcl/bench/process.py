@@ -4,9 +4,9 @@ Each method runs as a user runs it, ``lfcl process RAW --method M --outputs cent
 ``outputs`` given), each run in a fresh process, so the wall time holds the start-up, the decode, the lens grid,
 the demosaic stage and the writing, and the peak resident memory is that process's own (``os.wait4``). The kernels
 are built and cached beforehand (:func:`run`). Reported per method: the median wall and demosaic-stage seconds
-over ``repeats`` runs, the largest peak RSS, the centre view's PSNR against the capture's truth (where the folder
-has one), and both times as ratios against the ``peer`` method of the same run: issue 20 asks admm-epi for at most
-2x admm-uv's end-to-end time and 4 GB at 500x500 lenses (BENCHMARKS.md has the figures and the commands).
+over ``repeats`` runs, the largest peak RSS, the centre view's PSNR against ``truth`` (the CLI takes a folder of
+`lfcl simulate` and its truth), and both times as ratios against the ``peer`` method of the same run: issue 20 asks
+admm-epi for at most 2x admm-uv's end-to-end time and 4 GB at 500x500 lenses (BENCHMARKS.md has the figures and the commands).
 
 Example::
 

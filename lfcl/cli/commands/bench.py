@@ -154,10 +154,9 @@ def process_command(capture_dir, lenses, lux, scene, seed, methods, peer, output
     """`lfcl process` end to end per method: seconds and peak memory, as ratios against a peer method."""
     import tempfile
 
-    import numpy as np
-
     from ...bench import process
     from ...bench.timing import parse_size
+    from ...evaluation.evaluate import load_capture
 
     method_list = [m.strip() for m in methods.split(",") if m.strip()]
     progress = None if as_json else (lambda label: click.echo(f"  {label} ...", err=True))
@@ -169,13 +168,9 @@ def process_command(capture_dir, lenses, lux, scene, seed, methods, peer, output
             size = parse_size(lenses, "--lenses")
             capture_dir = write_capture(simulate(scene, lenses=size, lux=lux, seed=seed), Path(tmp) / "capture")
             label = f"{scene}, {size[0]}x{size[1]} lenses, {lux:g} lux, seed {seed}"
-        raw, truth_file, meta_file = (capture_dir / n for n in ("raw.dng", "truth.npy", "meta.json"))
-        if not raw.is_file():
-            raise ValueError(f"{capture_dir} holds no raw.dng (a folder of `lfcl simulate`)")
-        pitch = int(json.loads(meta_file.read_text()).get("pitch", [9])[0]) if meta_file.is_file() else 9
-        truth = np.load(truth_file) if truth_file.is_file() else None
-        report = process.run(raw, method_list, peer, pitch=pitch, truth=truth, repeats=repeats, device=device,
-                             progress=progress, label=label, outputs=outputs)
+        capture = load_capture(capture_dir)  # a folder of `lfcl simulate`: its pitch and truth
+        report = process.run(capture_dir / "raw.dng", method_list, peer, pitch=capture.pitch[0], truth=capture.truth,
+                             repeats=repeats, device=device, progress=progress, label=label, outputs=outputs)
     click.echo(json.dumps(report, indent=2) if as_json else process.format_report(report))
 
 
