@@ -16,6 +16,7 @@ KERNELS = [
     "linear4d", "lens disagreement", "lens swap (half the lenses)", "lens copy (half the lenses)",
     "lens fill (half the lenses)",
     "D uv", "D^T uv", "D^T D uv", "normal_apply uv", "jacobi_apply uv", "build_rhs uv", "lens_solve uv",
+    "D_epi, colour-mixed", "D_epi^T",
     "D uvst", "D^T uvst", "D^T D uvst", "normal_apply uvst", "jacobi_apply uvst", "build_rhs uvst",
     "dot", "norm2", "diff_norm2", "abs_sum", "soft_threshold", "zu_update", "axpby",
 ]
@@ -51,6 +52,7 @@ def test_bench_kernels_json():
     assert by_name["norm2"]["bytes"] == 4 * P
     assert by_name["lens disagreement"]["bytes"] == 4 * (2 * P + N)
     assert by_name["lens fill (half the lenses)"]["bytes"] == 4 * P // 2
+    assert by_name["D_epi^T"]["bytes"] == 4 * 3 * P
 
 
 def test_bench_kernels_table_and_errors():

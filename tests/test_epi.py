@@ -55,11 +55,12 @@ def loop_epi(x5: np.ndarray, disparity: np.ndarray, confidence: np.ndarray) -> n
         for block, (own, n, last) in enumerate(((s, S, u == U - 1), (t, T, v == V - 1))):
             if last:
                 continue
-            p = f32(own) - d
-            i0 = math.floor(p)
+            # p = own - d exactly: floor(p) = own + floor(-d), fraction -d - floor(-d) (exact in float32)
+            whole = math.floor(-d)
+            i0 = own + whole
             for c in range(C):
                 value = 0.0
-                for k, weight in zip(range(-1, 3), keys(float(p - f32(i0)))):
+                for k, weight in zip(range(-1, 3), keys(float(-d - f32(whole)))):
                     lens = min(max(i0 + k, 0), n - 1)
                     value += weight * (x5[c, lens, u + 1, t, v] if block == 0 else x5[c, s, u, lens, v + 1])
                 out[block, c, s, u, t, v] = w * (value - x5[c, s, u, t, v])

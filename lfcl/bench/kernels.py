@@ -201,6 +201,34 @@ def lens_copy_cases(runtime, sensor, pitch) -> list[Case]:
     ]
 
 
+def epi_cases(runtime, sensor, pitch) -> list[Case]:
+    """admm-epi's prior along the epipolar lines (lfcl/ops/epi.py): the forward with the colour mix, as the solver's
+    normal operator runs it, and the adjoint, on a disparity that ramps from -1.2 to +1.2 lenses per view step down
+    the frame and by 0.3 across it (fractional everywhere: every ray interpolates over 4 lenses)."""
+    from ..ops.epi import EpiGradient, epi_adjoint_np, epi_matrix_np, epi_mixed_gradient_np
+
+    S, T = sensor[0] // pitch[0], sensor[1] // pitch[1]
+    disparity = (np.linspace(-1.2, 1.2, S)[:, None] + np.linspace(0.0, 0.3, T)[None, :]).astype(np.float32)
+    op = EpiGradient(runtime, (3, *sensor), pitch)
+    op.set_maps(disparity)
+    matrix = {}
+
+    def twin_matrix():  # untimed set-up of the twin's sparse matrix, built once per map as the solver's twin does
+        if "M" not in matrix:
+            matrix["M"] = epi_matrix_np(disparity, pitch)
+        return matrix["M"]
+
+    P = 3 * sensor[0] * sensor[1]
+    return [
+        Case("D_epi, colour-mixed", "epi.cl:epi_forward", "read P + write 2P", 3 * P, ("x", "g_uv"),
+             lambda d: op.forward(d["x"], out=d["g_uv"], mixed=True),
+             lambda h: epi_mixed_gradient_np(h["x"], disparity, pitch, matrix=twin_matrix())),
+        Case("D_epi^T", "epi.cl:epi_adjoint", "read 2P + write P", 3 * P, ("g_uv", "y"),
+             lambda d: op.adjoint(d["g_uv"], out=d["y"]),
+             lambda h: epi_adjoint_np(h["g_uv"], disparity, pitch, matrix=twin_matrix())),
+    ]
+
+
 def build_cases(runtime, height: int, width: int, pitch) -> list[Case]:
     """The benchmarked kernels, in run order (big gradient buffers last but one group)."""
     N, P = height * width, 3 * height * width
@@ -288,6 +316,8 @@ def build_cases(runtime, height: int, width: int, pitch) -> list[Case]:
                  lambda h, dims=dims: gradient_gram_np(h["x"], pitch, dims)),
         ]
         cases += admm_cases(dims)
+        if dims == "uv" and height % U == 0 and width % V == 0:  # the same [2, 3, H, W] buffers
+            cases += epi_cases(runtime, sensor, pitch)
 
     cases += [
         Case("dot", "reduce.cl:dot_partials", "read 2P", 2 * P, ("x", "x2"),

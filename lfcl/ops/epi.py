@@ -22,8 +22,10 @@ point, so it is the lens whose depth they share (the prototype measured +0.03 dB
 is exactly the (u, v) forward differences of lfcl/ops/gradient.py.
 
 The index arithmetic (which lenses a ray reads, which taps) is done in float32 with every operation
-rounded on its own, here and in lfcl/kernels/epi.cl, so that the twin and the device pick the same lenses;
-the weights and values are in the twin's dtype (float64 capable).
+rounded on its own, here and in lfcl/kernels/epi.cl, so that the twin and the device pick the same lenses
+(the taps' floor(s - d) = s + floor(-d) and their fraction -d - floor(-d) are exact); the weights and values
+are in the twin's dtype (float64 capable). The device's adjoint evaluates each weight from its distance
+|d - k| instead (the same Catmull-Rom kernel, equal up to float32 rounding; lfcl/kernels/epi.cl keys_at).
 
 The numpy twin builds the operator as a sparse matrix (one per sensor geometry and maps, shared by the
 channels). The device computes the forward and the adjoint as gathers (lfcl/kernels/epi.cl) from the
@@ -107,11 +109,14 @@ def ray_maps_np(disparity, confidence, pitch) -> tuple[np.ndarray, np.ndarray]:
 
 
 def lens_taps_np(own: np.ndarray, d: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The 4 clamped lens indices [..., 4] and Catmull-Rom weights [..., 4] (float64) of p = own - d."""
-    p = np.asarray(own, dtype=np.float32) - np.asarray(d, dtype=np.float32)
-    i0 = np.floor(p)
-    index = np.clip(i0[..., None] + np.arange(-1, 3, dtype=np.float32), 0, n - 1).astype(np.intp)
-    return index, keys_weights_np(p - i0)
+    """The 4 clamped lens indices [..., 4] and Catmull-Rom weights [..., 4] (float64) of p = own - d, own whole
+    lens indices: floor(p) = own + floor(-d) and the fraction -d - floor(-d), both exact in float32 (as the kernels
+    compute them)."""
+    d = np.asarray(d, dtype=np.float32)
+    whole = np.floor(-d)
+    base = np.asarray(own, dtype=np.float32) + whole
+    index = np.clip(base[..., None] + np.arange(-1, 3, dtype=np.float32), 0, n - 1).astype(np.intp)
+    return index, keys_weights_np(-d - whole)
 
 
 def epi_matrix_np(disparity, pitch, confidence=None) -> scipy.sparse.csr_matrix:
@@ -196,11 +201,11 @@ def epi_diagonal_np(disparity, pitch, confidence=None, matrix=None) -> np.ndarra
 
 
 def _tap_span(own, d, n):
-    """Per sample, the first and last lens a tap of nonzero weight lands on (float32 p = own - d;
+    """Per sample, the first and last lens a tap of nonzero weight lands on (p = own - d as :func:`lens_taps_np`;
     only the tap at floor(p) when p is a whole number), clamped to [0, n - 1]."""
-    p = np.asarray(own, dtype=np.float32) - d
-    i0 = np.floor(p)
-    exact = (p - i0) == 0
+    whole = np.floor(-d)
+    i0 = np.asarray(own, dtype=np.float32) + whole
+    exact = (-d - whole) == 0
     return np.clip(np.where(exact, i0, i0 - 1), 0, n - 1), np.clip(np.where(exact, i0, i0 + 2), 0, n - 1)
 
 
