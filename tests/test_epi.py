@@ -707,3 +707,46 @@ def test_epi_params_sets_lam_xc_from_the_schedule(monkeypatch):
     params, _ = epi.epi_params(AdmmParams(lam=0.004), 0.01, lam=0.004)  # an explicit lam: the ratio to it
     assert params.lam == 0.004 and params.lam_xc == pytest.approx(0.002)
     assert epi.epi_solver_bytes((90, 90), True, True) > epi.epi_solver_bytes((90, 90), True)
+
+
+def test_fused_cg_step_matches_its_numpy_twin(runtime, rng):
+    """CgSteps: q = N p with <p, q>, then x += alpha p, r -= alpha q, pz = r / diag(N) with <r, pz> and |r|^2,
+    against float64 twins (N = A^T A + rho K^T K with the EPI, cross-channel and fall-back blocks), on a frame
+    whose width is not a whole number of 16-column runs."""
+    from lfcl.ops.cfa import cfa_adjoint_np, cfa_sample_np
+    from lfcl.solvers.epi import CgSteps, EpiAdmmSolver, EpiPrior, epi_cross_adjoint_np, epi_cross_gradient_np
+    from lfcl.solvers.params import AdmmParams
+
+    S, T, U, V = 3, 5, 3, 3  # W = 15: one run, partly past the row
+    H, W = S * U, T * V
+    disparity, confidence = maps(rng, S, T, spread=1.5)
+    zeros, fall = np.zeros_like(disparity), 1 - confidence
+    rho, alpha = 0.7, 0.37
+    solver = EpiAdmmSolver(runtime, (H, W), "GRBG", (U, V))
+    solver.prepare(AdmmParams(lam=0.01, lam_xc=0.02, rho=rho), EpiPrior(disparity, confidence, lam_fb=0.01))
+    x, p, r = (rng.standard_normal((3, H, W)).astype(np.float32) for _ in range(3))
+    p64 = p.astype(np.float64)
+
+    def gram(v, d, w):
+        return epi_adjoint_np(epi_gradient_np(v, d, (U, V), w), d, (U, V), w)
+
+    expected_q = cfa_adjoint_np(cfa_sample_np(p64, "GRBG"), "GRBG") + rho * (
+        gram(p64, disparity, confidence) + gram(p64, zeros, fall)
+        + epi_cross_adjoint_np(epi_cross_gradient_np(p64, disparity, (U, V), confidence), disparity, (U, V),
+                               confidence))
+    epi = epi_diagonal_np(disparity, (U, V), confidence)
+    diagonal = cfa_adjoint_np(np.ones((H, W)), "GRBG") + rho * (
+        epi + epi_diagonal_np(zeros, (U, V), fall) + np.stack([epi, 2 * epi, epi]))
+    steps = CgSteps(solver, rho)
+    xd, pd, rd, qd, zd = (runtime.to_device(a) for a in (x, p, r, np.zeros_like(x), np.zeros_like(x)))
+    pq = steps.apply_dot(pd, qd)
+    np.testing.assert_allclose(qd.get(), expected_q, rtol=1e-5, atol=1e-5)
+    assert pq == pytest.approx(float(np.sum(p64 * expected_q)), rel=1e-5)
+    rz, r2 = steps.update(alpha, xd, pd, rd, qd, zd)
+    r_next = r - alpha * qd.get().astype(np.float64)  # from the device's q: the step's own arithmetic
+    z_next = r_next / diagonal
+    np.testing.assert_allclose(xd.get(), x + alpha * p64, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(rd.get(), r_next, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(zd.get(), z_next, rtol=1e-5, atol=1e-5)
+    assert rz == pytest.approx(float(np.sum(r_next * z_next)), rel=1e-5)
+    assert r2 == pytest.approx(float(np.sum(r_next * r_next)), rel=1e-5)

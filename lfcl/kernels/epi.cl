@@ -234,17 +234,31 @@ inline float16 data_weight(__global const float *weight_runs, int row, int16 col
     const size_t plane = (size_t)height * width, base = (size_t)row * width;                           \
     const int16 cols = lane_columns(col0);
 
-// out = rho out + A^T W A src  (out holding sum_b K_b^T K_b src)
+// The sum of the 16 lanes, pairwise.
+inline float lane_sum(float16 v)
+{
+    const float8 a = v.lo + v.hi;
+    const float4 b = a.lo + a.hi;
+    const float2 c = b.lo + b.hi;
+    return c.x + c.y;
+}
+
+// out = rho out + A^T W A src  (out holding sum_b K_b^T K_b src), and partial[work-item] = <src, out> over its 3 x 16
+// samples (CG's p.q; the host sums the partials, compensated: lfcl/ops/reduce.py sum).
 __kernel void epi_normal_finish(__global float *out, __global const float *src, __global const float *weight_runs,
-                                const float rho, const int height, const int width, const int pattern)
+                                const float rho, const int height, const int width, const int pattern,
+                                __global float *partial)
 {
     RUN_PROLOGUE
+    float16 product = (float16)0.0f;
     for (int c = 0; c < 3; ++c) {
         const size_t at = c * plane + base;
-        store_row(rho * load_row(out + at, col0, 0, width)
-                  + data_weight(weight_runs, row, cols, pattern, c) * load_row(src + at, col0, 0, width),
-                  out + at, col0, width);
+        const float16 p = load_row(src + at, col0, 0, width);
+        const float16 q = rho * load_row(out + at, col0, 0, width) + data_weight(weight_runs, row, cols, pattern, c) * p;
+        store_row(q, out + at, col0, width);
+        product += p * q;  // lanes past the row: 0 (load_row)
     }
+    partial[(size_t)row * get_global_size(0) + get_global_id(0)] = lane_sum(product);
 }
 
 // The right-hand side and CG's first residual carried from one iteration to the next (lfcl/solvers/epi.py,
@@ -282,9 +296,17 @@ __kernel void epi_rhs_finish(__global float *out, __global const float *b, __glo
     }
 }
 
-// out = r / diag(A^T W A + rho K^T K), 0 where the diagonal is 0. kdiag = diag(K^T K) [H, W] of the blocks
-// that treat the colours alike; with `cross`, the cross-channel block (D C)^T (D C) = C^T C (x) D^T D adds
-// its diagonal: that of C^T C, (1, 2, 1) for (R, G, B), times xdiag = diag(D^T D) [H, W].
+// 1 / diag(A^T W A + rho K^T K) of colour c, 0 where the diagonal is 0. kdiag = diag(K^T K) [H, W] of the blocks
+// that treat the colours alike; with `cross`, the cross-channel block (D C)^T (D C) = C^T C (x) D^T D adds its
+// diagonal: that of C^T C, (1, 2, 1) for (R, G, B), times xdiag = diag(D^T D) [H, W].
+inline float16 jacobi_scale(float16 own, float16 other, __global const float *weight_runs, int row, int16 cols,
+                            int pattern, int c, float rho)
+{
+    const float16 diagonal = data_weight(weight_runs, row, cols, pattern, c) + rho * (own + (c == 1 ? 2.0f : 1.0f) * other);
+    return select((float16)0.0f, 1.0f / diagonal, diagonal > 0.0f);
+}
+
+// out = r / diag(A^T W A + rho K^T K) (jacobi_scale).
 __kernel void epi_jacobi(__global const float *r, __global float *out, __global const float *kdiag,
                          __global const float *xdiag, const int cross, __global const float *weight_runs,
                          const float rho, const int height, const int width, const int pattern)
@@ -294,11 +316,37 @@ __kernel void epi_jacobi(__global const float *r, __global float *out, __global 
     const float16 other = cross ? load_row(xdiag + base, col0, 0, width) : (float16)0.0f;
     for (int c = 0; c < 3; ++c) {
         const size_t at = c * plane + base;
-        const float16 diagonal = data_weight(weight_runs, row, cols, pattern, c)
-                               + rho * (own + (c == 1 ? 2.0f : 1.0f) * other);
-        store_row(select((float16)0.0f, load_row(r + at, col0, 0, width) / diagonal, diagonal > 0.0f), out + at,
-                  col0, width);
+        store_row(load_row(r + at, col0, 0, width) * jacobi_scale(own, other, weight_runs, row, cols, pattern, c, rho),
+                  out + at, col0, width);
     }
+}
+
+// One CG step's vector work in one pass: x += alpha p, r -= alpha q, pz = r / diag (epi_jacobi), and per work-item
+// the partial sums of <r, pz> and |r|^2 (the host sums them, compensated: lfcl/solvers/cg.py).
+__kernel void epi_cg_update(__global float *x, __global const float *p, __global float *r, __global const float *q,
+                            __global float *pz, const float alpha, __global const float *kdiag,
+                            __global const float *xdiag, const int cross, __global const float *weight_runs,
+                            const float rho, const int height, const int width, const int pattern,
+                            __global float *rz_partial, __global float *r2_partial)
+{
+    RUN_PROLOGUE
+    const float16 own = load_row(kdiag + base, col0, 0, width);
+    const float16 other = cross ? load_row(xdiag + base, col0, 0, width) : (float16)0.0f;
+    float16 rz = (float16)0.0f, r2 = (float16)0.0f;
+    for (int c = 0; c < 3; ++c) {
+        const size_t at = c * plane + base;
+        const float16 pc = load_row(p + at, col0, 0, width);
+        store_row(load_row(x + at, col0, 0, width) + alpha * pc, x + at, col0, width);
+        const float16 rc = load_row(r + at, col0, 0, width) - alpha * load_row(q + at, col0, 0, width);
+        const float16 zc = rc * jacobi_scale(own, other, weight_runs, row, cols, pattern, c, rho);
+        store_row(rc, r + at, col0, width);
+        store_row(zc, pz + at, col0, width);
+        rz += rc * zc;  // lanes past the row: 0 (load_row)
+        r2 += rc * rc;
+    }
+    const size_t w = (size_t)row * get_global_size(0) + get_global_id(0);
+    rz_partial[w] = lane_sum(rz);
+    r2_partial[w] = lane_sum(r2);
 }
 
 // partial[row] = sum over the row of w (x[colour] - b)^2 (Kahan-compensated). Global size: (H).
