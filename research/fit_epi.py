@@ -42,7 +42,7 @@ from lfcl.grid.model import AlignedGrid
 from lfcl.layout import LightFieldShape, planes_to_exchange
 from lfcl.noise.model import from_noise_profile
 from lfcl.ops.malvar import Malvar
-from lfcl.solvers.epi import EPI_DEPTH_OPTIONS, EPI_SCHEDULE, EpiAdmmSolver, EpiPrior
+from lfcl.solvers.epi import EPI_SCHEDULE, EpiAdmmSolver, EpiPrior, epi_depth_options
 from lfcl.solvers.params import AdmmParams
 
 REAL = {"antinous": "../shared/realdata/hci_epinet/antinous", "lytro2067": "../shared/realdata/lytro_epinet/2067"}
@@ -112,7 +112,7 @@ def depth_for(kind, cap, noise, scene, seed, lenses) -> tuple[Depth, dict]:
     if kind == "truth":
         return Depth(gt, None), {"source": "truth", "seconds": 0.0}
     began = time.perf_counter()
-    options = {**EPI_DEPTH_OPTIONS, **({"occlusion": False} if kind == "noocc" else {})}
+    options = {**epi_depth_options(noise.sigma), **({"occlusion": False} if kind == "noocc" else {})}
     est = estimate_disparity(cap.mosaic, cap.pattern, cap.pitch, noise=noise, **options)
     seconds = time.perf_counter() - began
     if kind == "trusted":  # the estimate with confidence 1 everywhere: no fall-back block
@@ -451,7 +451,7 @@ def run_profile(args):
     for occ in (True, False):
         best_of(f"disparity occlusion={occ}", lambda occ=occ: estimate_disparity(cap.mosaic, cap.pattern, cap.pitch,
                                                                                   noise=noise, occlusion=occ))
-    depth = estimate_disparity(cap.mosaic, cap.pattern, cap.pitch, noise=noise, **EPI_DEPTH_OPTIONS)
+    depth = estimate_disparity(cap.mosaic, cap.pattern, cap.pitch, noise=noise, **epi_depth_options(noise.sigma))
     lam = setting.lam_per_sigma * noise.sigma
     lam_fb = setting.fb_per_lam * lam
     prior = EpiPrior(depth.disparity, depth.confidence if lam_fb > 0 else None, lam_fb=lam_fb)  # as admm-epi runs

@@ -359,7 +359,7 @@ def test_method_admm_epi_runs_and_records_the_disparity(runtime, rng):
     from lfcl.depth.estimate import DEFAULTS
     from lfcl.grid.model import AlignedGrid
     from lfcl.noise.model import NoiseEstimate
-    from lfcl.solvers.epi import EPI_DEPTH_OPTIONS, epi_setting
+    from lfcl.solvers.epi import epi_depth_options, epi_setting
 
     S, T, U, V = 10, 10, 9, 9
     b, _, truth = plane_scene_mosaic(rng, S, T, U, V, disparity=0.5, noise=0.01)
@@ -371,8 +371,10 @@ def test_method_admm_epi_runs_and_records_the_disparity(runtime, rng):
     assert result.parameters["lam_fb"] == pytest.approx(setting.fb_per_lam * setting.lam_per_sigma * 0.01)
     assert result.parameters["start"] == setting.start
     assert result.parameters["disparity"]["median"] == pytest.approx(0.5, abs=0.1)
-    # every option of the estimate is written down, its own defaults with admm-epi's changes over them
-    assert result.parameters["disparity"]["options"] == {**DEFAULTS, **EPI_DEPTH_OPTIONS}
+    # every option of the estimate is written down, its own defaults with admm-epi's changes over them (the step
+    # of the schedule's row at this noise)
+    assert result.parameters["disparity"]["options"] == {**DEFAULTS, **epi_depth_options(0.01)}
+    assert result.parameters["disparity"]["options"]["step"] == setting.depth_step
     assert result.parameters["disparity"]["options"]["occlusion"] is True
     assert 2 <= result.iterations <= setting.iterations
     assert result.parameters["change_tol"] == pytest.approx(setting.change_per_sigma * 0.01)
@@ -391,23 +393,43 @@ def test_method_admm_epi_runs_and_records_the_disparity(runtime, rng):
 
 
 def test_epi_setting_follows_the_noise_in_log_sigma():
-    """Between two rows lam / sigma, lam_fb / lam and the iterations are linear in log sigma; outside, the end rows."""
+    """Between two rows lam / sigma, lam_fb / lam and the iterations are linear in log sigma, the start and the
+    disparity's step the nearer row's; outside, the end rows."""
     from lfcl.solvers.epi import EpiSetting, epi_setting
 
     rows = (EpiSetting(sigma=1e-2, lam_per_sigma=0.4, fb_per_lam=2.0, change_per_sigma=0.2, iterations=18,
-                       start="linear4d", xc_per_lam=0.8),
+                       start="linear4d", xc_per_lam=0.8, depth_step=0.1),
             EpiSetting(sigma=1e-3, lam_per_sigma=0.2, fb_per_lam=1.0, change_per_sigma=0.0, iterations=10,
-                       start="malvar"))
+                       start="malvar", depth_step=0.2))
     quarter = 1e-3 * 10 ** 0.25  # a quarter of the way from 1e-3 to 1e-2 in log sigma
     got = epi_setting(quarter, rows)
     assert got.lam_per_sigma == pytest.approx(0.25) and got.fb_per_lam == pytest.approx(1.25)
     assert got.xc_per_lam == pytest.approx(0.2)
     assert got.change_per_sigma == pytest.approx(0.05)
     assert got.iterations == 12 and got.start == "malvar" and got.sigma == pytest.approx(quarter)
+    assert got.depth_step == 0.2
     assert epi_setting(1e-3 * 10 ** 0.75, rows).start == "linear4d"
+    assert epi_setting(1e-3 * 10 ** 0.75, rows).depth_step == 0.1
     low, high = epi_setting(1e-5, rows), epi_setting(0.5, rows)
     assert (low.lam_per_sigma, low.iterations, low.start) == (0.2, 10, "malvar")
     assert (high.lam_per_sigma, high.iterations, high.start) == (0.4, 18, "linear4d")
+
+
+def test_epi_depth_options_follow_the_schedule_and_an_explicit_step_wins(monkeypatch):
+    import lfcl.solvers.epi as epi
+
+    assert epi.epi_depth_options(epi.EPI_SCHEDULE[0].sigma)["step"] == epi.EPI_SCHEDULE[0].depth_step
+    assert epi.epi_depth_options(epi.EPI_SCHEDULE[-1].sigma)["step"] == epi.EPI_SCHEDULE[-1].depth_step
+    assert epi.epi_depth_options(None)["step"] == epi.DEPTH_STEP
+    monkeypatch.setattr(epi, "EPI_DEPTH_OPTIONS", {"step": 0.05, "occlusion": False})
+    assert epi.epi_depth_options(epi.EPI_SCHEDULE[0].sigma) == {"step": 0.05, "occlusion": False}
+
+
+def test_epi_setting_refuses_a_sigma_that_is_no_noise_level():
+    from lfcl.solvers.epi import EpiSetting, epi_setting
+
+    rows = (EpiSetting(sigma=1e-3, lam_per_sigma=0.2, fb_per_lam=1.0, change_per_sigma=0.0, iterations=10,
+                       start="malvar"),)
     for bad in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(ValueError, match="sigma"):
             epi_setting(bad, rows)

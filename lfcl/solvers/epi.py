@@ -78,6 +78,11 @@ class EpiPrior:
         return self.lam_fb > 0 and bool(np.any(self.maps(lenses)[1] < 1))
 
 
+#: The disparity's candidate spacing where no noise level chooses it (the parabola through the best candidate and its
+#: neighbours refines between candidates; lfcl.depth.estimate_disparity's own default is 0.05).
+DEPTH_STEP = 0.1
+
+
 @dataclasses.dataclass(frozen=True)
 class EpiSetting:
     """admm-epi's parameters at one noise level (a row of :data:`EPI_SCHEDULE`)."""
@@ -89,24 +94,25 @@ class EpiSetting:
     iterations: int  # at most
     start: str  # the first estimate (lfcl.demosaic.methods.solve_aligned's ``start``)
     xc_per_lam: float = 0.0  # lam_xc = xc_per_lam * lam: the cross-channel block along the epipolar lines (0: none)
+    depth_step: float = DEPTH_STEP  # the disparity's candidate spacing (lenses per view step; epi_depth_options)
 
 
 #: admm-epi's defaults by noise level, fitted by research/fit_epi.py on training seeds with the noise model
 #: `lfcl process` reads (the DNG's noise profile; docs/admm.md, "admm-epi"). Between rows :func:`epi_setting`
 #: interpolates lam_per_sigma, fb_per_lam, xc_per_lam, change_per_sigma and the iterations in log sigma and takes
-#: the start of the nearer row; outside, the end row's. The cross-channel block along the lines (xc_per_lam) won at
+#: the start and the disparity's step of the nearer row; outside, the end row's. The cross-channel block along the lines (xc_per_lam) won at
 #: every level; the fall-back (fb_per_lam > 0, with the rays weighted by the disparity's confidence) lost at every
 #: level to the EPI prior on every ray (research/fit_epi_fit_48.json: depth "trusted" against "shipped"); with it the
 #: guarded start won at 12-50 lux too (research/fit_epi_starts_48.json).
 EPI_SCHEDULE = (  # the median sigma of the training captures at 0.5, 2, 12 and 50 lux
     EpiSetting(sigma=1.03e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.02, iterations=20, start="guarded",
-               xc_per_lam=1.0),
+               xc_per_lam=1.0, depth_step=0.2),
     EpiSetting(sigma=1.92e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.05, iterations=20, start="guarded",
-               xc_per_lam=1.0),
+               xc_per_lam=1.0, depth_step=0.2),
     EpiSetting(sigma=4.6e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.05, iterations=20, start="guarded",
-               xc_per_lam=1.0),
+               xc_per_lam=1.0, depth_step=0.2),
     EpiSetting(sigma=9.24e-3, lam_per_sigma=0.4, fb_per_lam=0.0, change_per_sigma=0.05, iterations=20, start="guarded",
-               xc_per_lam=1.0),
+               xc_per_lam=1.0, depth_step=0.1),
 )
 
 #: lfcl.depth.estimate_disparity's options for admm-epi (its own defaults otherwise, the half apertures among them):
@@ -114,10 +120,19 @@ EPI_SCHEDULE = (  # the median sigma of the training captures at 0.5, 2, 12 and 
 #: the foreground's disparity on a band of background lenses and admm-epi fell 0.84 dB below Malvar at 50 lux;
 #: with them it gains +2.35 dB there, +0.14 / +0.22 dB on average on the training captures and -0.01 / +0.03 on
 #: held-out ones (docs/admm.md, "admm-epi").
-#: The candidates 0.1 lens apart instead of 0.05 (the parabola refines between them): on the training captures the
-#: centre view moved by -0.003 dB on average (-0.03..+0.04), the disparity took half the time and admm-epi 14 % less
-#: (research/epi_depth_step.py). The depth output keeps estimate_disparity's own step.
-EPI_DEPTH_OPTIONS: dict = {"step": 0.1}
+#: The candidates' spacing follows the noise (EpiSetting.depth_step, :func:`epi_depth_options`): 0.1 lens instead of
+#: 0.05 at every level (the centre view moved by -0.003 dB on average on the training captures, -0.03..+0.04, for
+#: half the disparity's time), and 0.2 at 0.5-12 lux (the training captures' centre view -0.005 dB on average at
+#: 0.5-2 lux, -0.08..+0.15, the mean image +0.06; but charts lost 0.25 dB at 50 lux, so that row keeps 0.1):
+#: research/epi_depth_step.py, docs/admm.md. The depth output keeps estimate_disparity's own step.
+EPI_DEPTH_OPTIONS: dict = {}
+
+
+def epi_depth_options(sigma: float | None) -> dict:
+    """lfcl.depth.estimate_disparity's options for admm-epi at noise level ``sigma`` (None: no noise level, the
+    step :data:`DEPTH_STEP`); an explicit step in :data:`EPI_DEPTH_OPTIONS` wins."""
+    step = epi_setting(max(float(sigma), 1e-6)).depth_step if sigma is not None else DEPTH_STEP
+    return {"step": step, **EPI_DEPTH_OPTIONS}
 
 
 def epi_setting(sigma: float, schedule=None) -> EpiSetting:
@@ -138,7 +153,8 @@ def epi_setting(sigma: float, schedule=None) -> EpiSetting:
                       fb_per_lam=(1 - t) * a.fb_per_lam + t * b.fb_per_lam,
                       change_per_sigma=(1 - t) * a.change_per_sigma + t * b.change_per_sigma,
                       iterations=round((1 - t) * a.iterations + t * b.iterations),
-                      start=a.start if t < 0.5 else b.start, xc_per_lam=(1 - t) * a.xc_per_lam + t * b.xc_per_lam)
+                      start=a.start if t < 0.5 else b.start, xc_per_lam=(1 - t) * a.xc_per_lam + t * b.xc_per_lam,
+                      depth_step=a.depth_step if t < 0.5 else b.depth_step)
 
 
 def epi_start(sigma: float, pitch) -> tuple[str, str | None]:
@@ -597,7 +613,8 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     H, W = b.shape
     began = time.perf_counter()
     depth = estimate_disparity(raw_mosaic, pattern, pitch, origin=origin, noise=noise, device=device,
-                               **(EPI_DEPTH_OPTIONS if depth_options is None else depth_options))
+                               **(epi_depth_options(None if noise is None else noise.sigma) if depth_options is None
+                                  else depth_options))
     depth_seconds = time.perf_counter() - began
     # The confidence splits the prior between the epipolar lines and the fall-back: without a fall-back every ray
     # keeps its full weight (a low-confidence lens would otherwise be left with almost no prior).
