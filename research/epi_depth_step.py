@@ -26,13 +26,14 @@ def main():
     parser.add_argument("--scenes", default="charts,deadleaves,finetexture")
     parser.add_argument("--seeds", default="1,2", help="noise seeds (1, 2: training; others held out)")
     parser.add_argument("--lux", default="0.5,2,12,50")
+    parser.add_argument("--lenses", type=int, default=48, help="lenses per side of every capture")
     args = parser.parse_args()
     steps = tuple(float(v) for v in args.steps.split(","))
     rows = {step: [] for step in steps}
     for scene in args.scenes.split(","):
         for seed in (int(v) for v in args.seeds.split(",")):
             for lux in (float(v) for v in args.lux.split(",")):
-                cap = capture(scene, seed, lux, 48)
+                cap = capture(scene, seed, lux, args.lenses)
                 noise = noise_of(cap)
                 malvar = scores(demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), "malvar").planes,
                                 cap.truth)
@@ -44,7 +45,8 @@ def main():
                                        got["psnr_mean"] - malvar["psnr_mean"], result.seconds,
                                        result.part_seconds["disparity"]))
                     print(f"{scene} seed {seed} {lux:g} lux step {step:g}: centre {rows[step][-1][0]:+.3f}, mean image "
-                          f"{rows[step][-1][1]:+.3f} dB", flush=True)
+                          f"{rows[step][-1][1]:+.3f} dB, {result.iterations} iterations, {result.seconds:.2f} s",
+                          flush=True)
     for step, values in rows.items():
         v = np.array(values)
         print(f"step {step:g}: centre gain mean {v[:, 0].mean():+.3f} worst {v[:, 0].min():+.3f} dB, mean image mean "
