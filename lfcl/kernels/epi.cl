@@ -254,7 +254,8 @@ __kernel void epi_normal_finish(__global float *out, __global const float *src, 
     for (int c = 0; c < 3; ++c) {
         const size_t at = c * plane + base;
         const float16 p = load_row(src + at, col0, 0, width);
-        const float16 q = rho * load_row(out + at, col0, 0, width) + data_weight(weight_runs, row, cols, pattern, c) * p;
+        const float16 q = rho * load_row(out + at, col0, 0, width)
+                        + data_weight(weight_runs, row, cols, pattern, c) * p;
         store_row(q, out + at, col0, width);
         product += p * q;  // lanes past the row: 0 (load_row)
     }
@@ -302,7 +303,8 @@ __kernel void epi_rhs_finish(__global float *out, __global const float *b, __glo
 inline float16 jacobi_scale(float16 own, float16 other, __global const float *weight_runs, int row, int16 cols,
                             int pattern, int c, float rho)
 {
-    const float16 diagonal = data_weight(weight_runs, row, cols, pattern, c) + rho * (own + (c == 1 ? 2.0f : 1.0f) * other);
+    const float16 diagonal = data_weight(weight_runs, row, cols, pattern, c)
+                           + rho * (own + (c == 1 ? 2.0f : 1.0f) * other);
     return select((float16)0.0f, 1.0f / diagonal, diagonal > 0.0f);
 }
 

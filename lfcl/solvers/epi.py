@@ -100,10 +100,10 @@ class EpiSetting:
 #: admm-epi's defaults by noise level, fitted by research/fit_epi.py on training seeds with the noise model
 #: `lfcl process` reads (the DNG's noise profile; docs/admm.md, "admm-epi"). Between rows :func:`epi_setting`
 #: interpolates lam_per_sigma, fb_per_lam, xc_per_lam, change_per_sigma and the iterations in log sigma and takes
-#: the start and the disparity's step of the nearer row; outside, the end row's. The cross-channel block along the lines (xc_per_lam) won at
-#: every level; the fall-back (fb_per_lam > 0, with the rays weighted by the disparity's confidence) lost at every
-#: level to the EPI prior on every ray (research/fit_epi_fit_48.json: depth "trusted" against "shipped"); with it the
-#: guarded start won at 12-50 lux too (research/fit_epi_starts_48.json).
+#: the start and the disparity's step of the nearer row; outside, the end row's. The cross-channel block along the
+#: lines (xc_per_lam) won at every level; the fall-back (fb_per_lam > 0, with the rays weighted by the disparity's
+#: confidence) lost at every level to the EPI prior on every ray (research/fit_epi_fit_48.json: depth "trusted"
+#: against "shipped"); with it the guarded start won at 12-50 lux too (research/fit_epi_starts_48.json).
 EPI_SCHEDULE = (  # the median sigma of the training captures at 0.5, 2, 12 and 50 lux
     EpiSetting(sigma=1.03e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.02, iterations=20, start="guarded",
                xc_per_lam=1.0, depth_step=0.2),
