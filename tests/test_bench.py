@@ -239,9 +239,24 @@ def test_bench_process_times_lfcl_process_per_method_against_its_peer(tmp_path):
     field = lfcl.lightfield(str(capture / "raw.dng"), pitch=9, method="malvar")
     assert rows["malvar"]["psnr_center"] == pytest.approx(psnr(field[:, :, 4, 4], truth[:, :, 4, 4]), abs=1e-3)
     assert rows["malvar"]["iterations"] == 0 and rows["admm-uv"]["iterations"] >= 1
+    assert rows["admm-uv"]["mean_iterations"] == rows["admm-uv"]["iterations"]  # one solve, no bands
     bad = _invoke(["bench", "process", str(capture), "--methods", "admm-nope"])
     assert bad.exit_code == 1 and "unknown method" in bad.output
     empty = tmp_path / "empty"
     empty.mkdir()
     missing = _invoke(["bench", "process", str(empty)])
     assert missing.exit_code == 1 and "raw.dng is missing" in missing.output
+
+
+def test_bench_process_averages_the_iterations_of_bands_over_their_lens_rows():
+    """A banded solve stops band by band: its time follows the iterations averaged over the lens rows."""
+    from lfcl.bench.process import _mean_iterations, format_report
+
+    banded = {"iterations": 20, "parameters": {"bands": {"lens_rows": [10, 30], "iterations": [20, 8]}}}
+    assert _mean_iterations(banded) == pytest.approx((10 * 20 + 30 * 8) / 40)
+    assert _mean_iterations({"iterations": 7, "parameters": {}}) == 7.0
+    assert _mean_iterations({"iterations": None}) is None
+    row = {"method": "admm-epi", "wall_seconds": 2.0, "wall_ratio": 2.0, "demosaic_seconds": 1.0, "demosaic_ratio": 2.0,
+           "disparity_seconds": 0.5, "peak_rss_gb": 1.0, "iterations": 20, "mean_iterations": 11.0, "psnr_center": None}
+    table = format_report({"raw": "x", "outputs": "center", "repeats": 1, "peer": "admm-uv", "rows": [row]})
+    assert "| 20 (11.0) |" in table

@@ -518,6 +518,8 @@ def test_admm_epi_in_bands_matches_the_whole_sensor(runtime, rng):
     bands = banded.parameters["bands"]
     assert len(bands["lens_rows"]) >= 3 and sum(bands["lens_rows"]) == S
     assert sorted({row["band"] for row in banded.history}) == list(range(len(bands["lens_rows"])))
+    # each band's own iteration count, as its history has it
+    assert bands["iterations"] == [sum(row["band"] == i for row in banded.history) for i in range(len(bands["lens_rows"]))]
     assert "bands of lens rows" in banded.stop_reason
     np.testing.assert_allclose(banded.planes, whole.planes, rtol=0, atol=1e-3)
     with pytest.raises(ValueError, match="halo"):

@@ -650,7 +650,8 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
         },
     }
     if len(bands) > 1:
-        parameters["bands"] = {"lens_rows": [s1 - s0 for s0, s1, _, _ in bands], "halo_lens_rows": halo}
+        parameters["bands"] = {"lens_rows": [s1 - s0 for s0, s1, _, _ in bands], "halo_lens_rows": halo,
+                               "iterations": [run.iterations for run in result.runs]}  # each band stops on its own
     return planes, parameters, result, depth_seconds
 
 
