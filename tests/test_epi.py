@@ -261,7 +261,7 @@ def test_carried_right_hand_side_and_residual_are_the_ones_they_stand_for(runtim
     a run (short, or long enough to pass several refreshes) both must equal their definitions, computed in float64
     by the twins from the solver's own z, u and x."""
     from lfcl.ops.cfa import cfa_adjoint_np, cfa_sample_np
-    from lfcl.solvers.epi import EpiAdmmSolver, EpiPrior, epi_cross_adjoint_np, epi_cross_gradient_np
+    from lfcl.solvers.epi import EPI_PROXIMAL, EpiAdmmSolver, EpiPrior, epi_cross_adjoint_np, epi_cross_gradient_np
     from lfcl.solvers.params import AdmmParams
 
     S, T, U, V = 5, 4, 9, 9
@@ -288,10 +288,11 @@ def test_carried_right_hand_side_and_residual_are_the_ones_they_stand_for(runtim
         return epi_gradient_np(v, op.maps[0], (U, V), op.maps[1])
 
     states = [(z.get().astype(np.float64), u.get().astype(np.float64)) for z, u in solver._states]
+    delta = EPI_PROXIMAL * params.rho  # the proximal term, around the next x-update's warm start: x
     rhs = cfa_adjoint_np(w * b, "GRBG") + params.rho * sum(
-        adjoint(op, z - u) for (op, _), (z, u) in zip(solver.blocks, states))
+        adjoint(op, z - u) for (op, _), (z, u) in zip(solver.blocks, states)) + delta * x
     normal_x = cfa_adjoint_np(w * cfa_sample_np(x, "GRBG"), "GRBG") + params.rho * sum(
-        adjoint(op, forward(op, x)) for op, _ in solver.blocks)
+        adjoint(op, forward(op, x)) for op, _ in solver.blocks) + delta * x
     scale = np.linalg.norm(rhs)
     assert np.linalg.norm(solver._rhs.get() - rhs) <= 1e-5 * scale
     assert np.linalg.norm(solver._cg[0].get() - (rhs - normal_x)) <= 1e-5 * scale
@@ -638,9 +639,9 @@ def test_cross_block_and_colour_differences_pass_the_dot_test(runtime, rng):
 
 def test_cross_block_gram_diagonal_is_colour_gram_times_the_epi_diagonal(runtime, rng):
     """diag((D C)^T (D C)) = (1, 2, 1) x diag(D^T D), probed column by column, and the device's Jacobi step
-    divides by diag(A^T W A + rho K^T K) with it."""
+    divides by diag(A^T W A + rho K^T K + delta) with it (delta the proximal term)."""
     from lfcl.ops.cfa import cfa_adjoint_np
-    from lfcl.solvers.epi import EpiAdmmSolver, EpiPrior, epi_cross_adjoint_np, epi_cross_gradient_np
+    from lfcl.solvers.epi import EPI_PROXIMAL, EpiAdmmSolver, EpiPrior, epi_cross_adjoint_np, epi_cross_gradient_np
     from lfcl.solvers.params import AdmmParams
 
     S, T, U, V = 3, 2, 3, 3
@@ -656,7 +657,7 @@ def test_cross_block_gram_diagonal_is_colour_gram_times_the_epi_diagonal(runtime
     weights[0, 0] = 0.0
     rho = 0.7
     fallback = epi_diagonal_np(np.zeros_like(disparity), (U, V), 1 - confidence)
-    expected = cfa_adjoint_np(np.tile(weights, (S, T)), "GRBG") + rho * (epi + fallback + probed)
+    expected = cfa_adjoint_np(np.tile(weights, (S, T)), "GRBG") + rho * (epi + fallback + probed) + EPI_PROXIMAL * rho
     solver = EpiAdmmSolver(runtime, (H, W), "GRBG", (U, V))
     solver.prepare(AdmmParams(lam=0.01, lam_xc=0.02, rho=rho), EpiPrior(disparity, confidence, lam_fb=0.01), weights)
     assert [lam for _, lam in solver.blocks] == [0.01, 0.02, 0.01] and solver.blocks[1][0] is solver.cross
@@ -735,10 +736,17 @@ def test_epi_params_sets_lam_xc_from_the_schedule(monkeypatch):
 
 def test_fused_cg_step_matches_its_numpy_twin(runtime, rng):
     """CgSteps: q = N p with <p, q>, then x += alpha p, r -= alpha q, pz = r / diag(N) with <r, pz> and |r|^2,
-    against float64 twins (N = A^T A + rho K^T K with the EPI, cross-channel and fall-back blocks), on a frame
-    whose width is not a whole number of 16-column runs."""
+    against float64 twins (N = A^T A + rho K^T K + delta with the EPI, cross-channel and fall-back blocks and the
+    proximal term), on a frame whose width is not a whole number of 16-column runs."""
     from lfcl.ops.cfa import cfa_adjoint_np, cfa_sample_np
-    from lfcl.solvers.epi import CgSteps, EpiAdmmSolver, EpiPrior, epi_cross_adjoint_np, epi_cross_gradient_np
+    from lfcl.solvers.epi import (
+        EPI_PROXIMAL,
+        CgSteps,
+        EpiAdmmSolver,
+        EpiPrior,
+        epi_cross_adjoint_np,
+        epi_cross_gradient_np,
+    )
     from lfcl.solvers.params import AdmmParams
 
     S, T, U, V = 3, 5, 3, 3  # W = 15: one run, partly past the row
@@ -757,10 +765,10 @@ def test_fused_cg_step_matches_its_numpy_twin(runtime, rng):
     expected_q = cfa_adjoint_np(cfa_sample_np(p64, "GRBG"), "GRBG") + rho * (
         gram(p64, disparity, confidence) + gram(p64, zeros, fall)
         + epi_cross_adjoint_np(epi_cross_gradient_np(p64, disparity, (U, V), confidence), disparity, (U, V),
-                               confidence))
+                               confidence)) + EPI_PROXIMAL * rho * p64
     epi = epi_diagonal_np(disparity, (U, V), confidence)
     diagonal = cfa_adjoint_np(np.ones((H, W)), "GRBG") + rho * (
-        epi + epi_diagonal_np(zeros, (U, V), fall) + np.stack([epi, 2 * epi, epi]))
+        epi + epi_diagonal_np(zeros, (U, V), fall) + np.stack([epi, 2 * epi, epi])) + EPI_PROXIMAL * rho
     steps = CgSteps(solver, rho)
     xd, pd, rd, qd, zd = (runtime.to_device(a) for a in (x, p, r, np.zeros_like(x), np.zeros_like(x)))
     pq = steps.apply_dot(pd, qd)

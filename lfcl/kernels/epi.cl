@@ -248,11 +248,12 @@ inline float lane_sum(float16 v)
     return c.x + c.y;
 }
 
-// out = rho out + A^T W A src  (out holding sum_b K_b^T K_b src), and partial[work-item] = <src, out> over its 3 x 16
-// samples (CG's p.q; the host sums the partials, compensated: lfcl/ops/reduce.py sum).
+// out = rho out + (A^T W A + delta) src  (out holding sum_b K_b^T K_b src; delta the proximal term of
+// lfcl/solvers/epi.py EPI_PROXIMAL), and partial[work-item] = <src, out> over its 3 x 16 samples (CG's p.q; the host
+// sums the partials, compensated: lfcl/ops/reduce.py sum).
 __kernel void epi_normal_finish(__global float *out, __global const float *src, __global const float *weight_runs,
-                                const float rho, const int height, const int width, const int pattern,
-                                __global float *partial)
+                                const float rho, const float delta, const int height, const int width,
+                                const int pattern, __global float *partial)
 {
     RUN_PROLOGUE
     float16 product = (float16)0.0f;
@@ -260,7 +261,7 @@ __kernel void epi_normal_finish(__global float *out, __global const float *src, 
         const size_t at = c * plane + base;
         const float16 p = load_row(src + at, col0, 0, width);
         const float16 q = rho * load_row(out + at, col0, 0, width)
-                        + data_weight(weight_runs, row, cols, pattern, c) * p;
+                        + (data_weight(weight_runs, row, cols, pattern, c) + delta) * p;
         store_row(q, out + at, col0, width);
         product += p * q;  // lanes past the row: 0 (load_row)
     }
@@ -268,63 +269,66 @@ __kernel void epi_normal_finish(__global float *out, __global const float *src, 
 }
 
 // The right-hand side and CG's first residual carried from one iteration to the next (lfcl/solvers/epi.py,
-// EpiAdmmSolver.iterate has the algebra): with kz = K^T z, rhs = A^T W b + rho K^T (z - u) and r = rhs - N x
-// (N = A^T W A + rho K^T K), after the z/u step (dual = K^T (z' - z), u' = u + K x - z'):
-//   rhs' = r + A^T W A x + rho (kz + 2 dual),   r' = rhs' - N x = rhs' - rhs + r,   kz' = kz + dual.
+// EpiAdmmSolver.iterate has the algebra): with kz = K^T z, rhs = A^T W b + rho K^T (z - u) + delta x_prev and
+// r = rhs - N x (N = A^T W A + rho K^T K + delta), after the z/u step (dual = K^T (z' - z), u' = u + K x - z'):
+//   rhs' = r + A^T W A x + rho (kz + 2 dual) + delta (2 x - x_prev),   r' = rhs' - N x = rhs' - rhs + r,
+//   kz' = kz + dual.
 __kernel void epi_carry_rhs(__global float *rhs, __global float *r, __global float *kz, __global const float *dual,
-                            __global const float *x, __global const float *weight_runs, const float rho,
-                            const int height, const int width, const int pattern)
+                            __global const float *x, __global const float *x_prev, __global const float *weight_runs,
+                            const float rho, const float delta, const int height, const int width, const int pattern)
 {
     RUN_PROLOGUE
     for (int c = 0; c < 3; ++c) {
         const size_t at = c * plane + base;
         const float16 d = load_row(dual + at, col0, 0, width), ri = load_row(r + at, col0, 0, width);
         const float16 kz_next = load_row(kz + at, col0, 0, width) + d;
-        const float16 rhs_next = ri + data_weight(weight_runs, row, cols, pattern, c) * load_row(x + at, col0, 0, width)
-                               + rho * (kz_next + d);
+        const float16 xc = load_row(x + at, col0, 0, width);
+        const float16 rhs_next = ri + data_weight(weight_runs, row, cols, pattern, c) * xc + rho * (kz_next + d)
+                               + delta * (2.0f * xc - load_row(x_prev + at, col0, 0, width));
         store_row(rhs_next - load_row(rhs + at, col0, 0, width) + ri, r + at, col0, width);
         store_row(rhs_next, rhs + at, col0, width);
         store_row(kz_next, kz + at, col0, width);
     }
 }
 
-// out = rho out + A^T W b  (out holding sum_b K_b^T (z_b - u_b)): the right-hand side from its definition
-// (EpiAdmmSolver.refresh).
-__kernel void epi_rhs_finish(__global float *out, __global const float *b, __global const float *weight_runs,
-                             const float rho, const int height, const int width, const int pattern)
+// out = rho out + A^T W b + delta x  (out holding sum_b K_b^T (z_b - u_b)): the right-hand side from its definition
+// (EpiAdmmSolver.refresh; x the warm start of the next x-update).
+__kernel void epi_rhs_finish(__global float *out, __global const float *b, __global const float *x,
+                             __global const float *weight_runs, const float rho, const float delta, const int height,
+                             const int width, const int pattern)
 {
     RUN_PROLOGUE
     const float16 raw = load_row(b + base, col0, 0, width);
     for (int c = 0; c < 3; ++c) {
         const size_t at = c * plane + base;
-        store_row(rho * load_row(out + at, col0, 0, width) + data_weight(weight_runs, row, cols, pattern, c) * raw,
-                  out + at, col0, width);
+        store_row(rho * load_row(out + at, col0, 0, width) + data_weight(weight_runs, row, cols, pattern, c) * raw
+                  + delta * load_row(x + at, col0, 0, width), out + at, col0, width);
     }
 }
 
-// 1 / diag(A^T W A + rho K^T K) of colour c, 0 where the diagonal is 0. kdiag = diag(K^T K) [H, W] of the blocks
+// 1 / diag(A^T W A + rho K^T K + delta) of colour c, 0 where the diagonal is 0. kdiag = diag(K^T K) [H, W] of the blocks
 // that treat the colours alike; with `cross`, the cross-channel block (D C)^T (D C) = C^T C (x) D^T D adds its
 // diagonal: that of C^T C, (1, 2, 1) for (R, G, B), times xdiag = diag(D^T D) [H, W].
 inline float16 jacobi_scale(float16 own, float16 other, __global const float *weight_runs, int row, int16 cols,
-                            int pattern, int c, float rho)
+                            int pattern, int c, float rho, float delta)
 {
     const float16 diagonal = data_weight(weight_runs, row, cols, pattern, c)
-                           + rho * (own + (c == 1 ? 2.0f : 1.0f) * other);
+                           + rho * (own + (c == 1 ? 2.0f : 1.0f) * other) + delta;
     return select((float16)0.0f, 1.0f / diagonal, diagonal > 0.0f);
 }
 
-// out = r / diag(A^T W A + rho K^T K) (jacobi_scale).
+// out = r / diag(A^T W A + rho K^T K + delta) (jacobi_scale).
 __kernel void epi_jacobi(__global const float *r, __global float *out, __global const float *kdiag,
                          __global const float *xdiag, const int cross, __global const float *weight_runs,
-                         const float rho, const int height, const int width, const int pattern)
+                         const float rho, const float delta, const int height, const int width, const int pattern)
 {
     RUN_PROLOGUE
     const float16 own = load_row(kdiag + base, col0, 0, width);
     const float16 other = cross ? load_row(xdiag + base, col0, 0, width) : (float16)0.0f;
     for (int c = 0; c < 3; ++c) {
         const size_t at = c * plane + base;
-        store_row(load_row(r + at, col0, 0, width) * jacobi_scale(own, other, weight_runs, row, cols, pattern, c, rho),
-                  out + at, col0, width);
+        const float16 scale = jacobi_scale(own, other, weight_runs, row, cols, pattern, c, rho, delta);
+        store_row(load_row(r + at, col0, 0, width) * scale, out + at, col0, width);
     }
 }
 
@@ -333,8 +337,8 @@ __kernel void epi_jacobi(__global const float *r, __global float *out, __global 
 __kernel void epi_cg_update(__global float *x, __global const float *p, __global float *r, __global const float *q,
                             __global float *pz, const float alpha, __global const float *kdiag,
                             __global const float *xdiag, const int cross, __global const float *weight_runs,
-                            const float rho, const int height, const int width, const int pattern,
-                            __global float *rz_partial, __global float *r2_partial)
+                            const float rho, const float delta, const int height, const int width,
+                            const int pattern, __global float *rz_partial, __global float *r2_partial)
 {
     RUN_PROLOGUE
     const float16 own = load_row(kdiag + base, col0, 0, width);
@@ -345,7 +349,7 @@ __kernel void epi_cg_update(__global float *x, __global const float *p, __global
         const float16 pc = load_row(p + at, col0, 0, width);
         store_row(load_row(x + at, col0, 0, width) + alpha * pc, x + at, col0, width);
         const float16 rc = load_row(r + at, col0, 0, width) - alpha * load_row(q + at, col0, 0, width);
-        const float16 zc = rc * jacobi_scale(own, other, weight_runs, row, cols, pattern, c, rho);
+        const float16 zc = rc * jacobi_scale(own, other, weight_runs, row, cols, pattern, c, rho, delta);
         store_row(rc, r + at, col0, width);
         store_row(zc, pz + at, col0, width);
         rz += rc * zc;  // lanes past the row: 0 (load_row)

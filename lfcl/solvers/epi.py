@@ -264,6 +264,14 @@ class EpiCrossGradient:
 #: 6e-6 of |rhs| after 6 iterations, 1.6e-4 after 50 and 1.3e-3 after 200, by then as large as the residual itself.
 EPI_REFRESH = 10
 
+#: The proximal term of the x-update, ``delta/2 ||x - x_k||^2`` with ``delta = EPI_PROXIMAL * rho`` (proximal ADMM:
+#: it vanishes at the fixed point, so the problem solved is the same). Without it a sample that measured no colour of a
+#: channel and that the prior reaches only through a tiny interpolation weight w (the last view of a lens, u = U - 1
+#: and v = V - 1, has no difference of its own; its neighbours' lines may barely touch it where the disparity jumps
+#: between lenses) has an x-update that scales the misfit of its one term by 1 / w: at 2 lux on the 500x500-lens
+#: charts, such samples reached 5.8 where the scene's brightest is 0.043 (docs/admm.md, "The proximal term").
+EPI_PROXIMAL = 0.01
+
 
 class CgSteps:
     """A CG step of :class:`EpiAdmmSolver`'s x-update in two passes over the vectors (lfcl/solvers/cg.py ``fused``):
@@ -399,13 +407,15 @@ class EpiAdmmSolver:
             op.adjoint(op.forward(src, self._scratch, mixed=mixed), out, accumulate=written)
             written = True
         self._pixelwise("epi_normal_finish", out.data, src.data, self._weight_runs.data, np.float32(rho),
-                        np.int32(self.height), np.int32(self.width), self._pattern, self._cg_partials[0].data)
+                        np.float32(EPI_PROXIMAL * rho), np.int32(self.height), np.int32(self.width), self._pattern,
+                        self._cg_partials[0].data)
         return out
 
     def _jacobi_args(self, rho):
         cross = self._has_cross
         return (self._kdiag.data, (self._xdiag if cross else self._kdiag).data, np.int32(cross),
-                self._weight_runs.data, np.float32(rho), np.int32(self.height), np.int32(self.width), self._pattern)
+                self._weight_runs.data, np.float32(rho), np.float32(EPI_PROXIMAL * rho), np.int32(self.height),
+                np.int32(self.width), self._pattern)
 
     def precondition(self, r, out, rho):
         """out = r / diag(A^T W A + rho K^T K)."""
@@ -438,11 +448,12 @@ class EpiAdmmSolver:
 
     def refresh(self, b, x, rho):
         """The vectors :meth:`iterate` carries, from their definitions: ``kz = K^T z``, the right-hand side
-        ``A^T W b + rho K^T (z - u)`` and CG's residual ``rhs - N x`` (4 gathers)."""
+        ``A^T W b + rho K^T (z - u) + delta x`` and CG's residual ``rhs - N x`` (4 gathers; delta the proximal term,
+        :data:`EPI_PROXIMAL`, and x the next x-update's warm start)."""
         self._adjoint_of(lambda z, u, scratch: self.vectors.copy(z, scratch), self._kz)
         self._adjoint_of(lambda z, u, scratch: self.vectors.axpby(1.0, z, -1.0, u, scratch), self._rhs)
-        self._pixelwise("epi_rhs_finish", self._rhs.data, b.data, self._weight_runs.data, np.float32(rho),
-                        np.int32(self.height), np.int32(self.width), self._pattern)
+        self._pixelwise("epi_rhs_finish", self._rhs.data, b.data, x.data, self._weight_runs.data, np.float32(rho),
+                        np.float32(EPI_PROXIMAL * rho), np.int32(self.height), np.int32(self.width), self._pattern)
         residual, product = self._cg[0], self._cg[3]
         self.normal(x, product, rho)
         self.vectors.axpby(1.0, self._rhs, -1.0, product, residual)
@@ -464,11 +475,14 @@ class EpiAdmmSolver:
     def iterate(self, b, x, params: AdmmParams, history: list, callback=None) -> str:
         """ADMM iterations from :meth:`start` until a stop rule fires; returns its reason.
 
-        The right-hand side ``A^T W b + rho K^T (z - u)`` and CG's first residual ``rhs - N x`` are carried from
-        one iteration to the next instead of recomputed, so an iteration runs K once (the z/u step) and K^T once
-        (``K^T (z' - z)``, which the dual residual needs anyway) besides its CG steps: with ``kz = K^T z``,
-        ``u' = u + K x - z'`` and CG's final residual ``r = rhs - N x``, ``rho K^T K x = rhs - r - A^T W A x``
-        gives ``rhs' = r + A^T W A x + rho (kz + 2 K^T (z' - z))`` and ``r' = rhs' - rhs + r`` (epi_carry_rhs).
+        The right-hand side ``A^T W b + rho K^T (z - u) + delta x_prev`` and CG's first residual ``rhs - N x``
+        (``N = A^T W A + rho K^T K + delta``, delta the proximal term :data:`EPI_PROXIMAL` and x_prev the x-update's
+        warm start) are carried from one iteration to the next instead of recomputed, so an iteration runs K once
+        (the z/u step) and K^T once (``K^T (z' - z)``, which the dual residual needs anyway) besides its CG steps:
+        with ``kz = K^T z``, ``u' = u + K x - z'`` and CG's final residual ``r = rhs - N x``,
+        ``rho K^T K x = rhs - r - A^T W A x - delta x`` gives
+        ``rhs' = r + A^T W A x + rho (kz + 2 K^T (z' - z)) + delta (2 x - x_prev)`` and ``r' = rhs' - rhs + r``
+        (epi_carry_rhs).
         Every :data:`EPI_REFRESH` iterations they are recomputed instead (:meth:`refresh`): the carry's float32
         round-off grows with the iterations.
         """
@@ -496,7 +510,8 @@ class EpiAdmmSolver:
             red.enqueue(slot + 1, "norm2", dual)
             if (len(history) + 1) % EPI_REFRESH:
                 self._pixelwise("epi_carry_rhs", self._rhs.data, residual.data, self._kz.data, dual.data, x.data,
-                                self._weight_runs.data, np.float32(rho), np.int32(self.height), np.int32(self.width),
+                                self._x_prev.data, self._weight_runs.data, np.float32(rho),
+                                np.float32(EPI_PROXIMAL * rho), np.int32(self.height), np.int32(self.width),
                                 self._pattern)
             else:
                 self.refresh(b, x, rho)
@@ -589,6 +604,7 @@ def admm_epi_reference(b, pattern, pitch, params: AdmmParams, x0, prior: EpiPrio
         prior_adjoint=prior_adjoint,
         diagonal=diagonal,
         prior_weights=prior_weights,
+        proximal=EPI_PROXIMAL * params.rho,
     )
 
 

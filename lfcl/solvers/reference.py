@@ -105,7 +105,7 @@ def admm_reference(b, pattern, pitch, dims, params: AdmmParams, x0, origin=(0, 0
 
 
 def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint, prior, prior_adjoint, diagonal,
-                   prior_weights=1.0) -> AdmmResult:
+                   prior_weights=1.0, proximal: float = 0.0) -> AdmmResult:
     """Scaled-form ADMM for ``min_x 1/2 ||W^(1/2) (A x - b)||^2 + lam sum(w_K |K x|)`` in float64.
 
     The generic core of the reference solvers: ``forward``/``adjoint`` are A and A^T,
@@ -113,7 +113,8 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
     terms), ``data_weights`` W (broadcast against b), ``prior_weights`` w_K (broadcast
     against K x; each entry's shrinkage threshold is w_K * lam / rho), ``diagonal``
     the diagonal of A^T W A + rho K^T K (the Jacobi preconditioner; entries <= 0 are
-    left unpreconditioned as 0). The x-update is warm-started Jacobi-PCG.
+    left unpreconditioned as 0). The x-update is warm-started Jacobi-PCG. ``proximal`` > 0 adds
+    ``proximal/2 ||x - x_k||^2`` to the x-update (proximal ADMM; the same fixed point), and to its diagonal.
     """
     b = np.asarray(b, dtype=np.float64)
     x = np.array(x0, dtype=np.float64)
@@ -121,9 +122,9 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
     thresholds = params.kappa * np.asarray(prior_weights, dtype=np.float64)
 
     def normal(v):
-        return adjoint(data_weights * forward(v)) + rho * prior_adjoint(prior(v))
+        return adjoint(data_weights * forward(v)) + rho * prior_adjoint(prior(v)) + proximal * v
 
-    diagonal = np.asarray(diagonal, dtype=np.float64)
+    diagonal = np.asarray(diagonal, dtype=np.float64) + proximal
     inverse_diagonal = np.divide(1.0, diagonal, out=np.zeros_like(diagonal), where=diagonal > 0)
 
     Atb = adjoint(data_weights * b)
@@ -132,7 +133,8 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
     history = []
     while True:
         x_next, steps = conjugate_gradient(
-            normal, Atb + rho * prior_adjoint(z - u), x, lambda r: inverse_diagonal * r, params.cg_steps, params.cg_tol
+            normal, Atb + rho * prior_adjoint(z - u) + proximal * x, x, lambda r: inverse_diagonal * r, params.cg_steps,
+            params.cg_tol
         )
         dx = prior(x_next)
         v = dx + u
