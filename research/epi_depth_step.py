@@ -13,7 +13,9 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from fit_epi import capture, noise_of, scores  # the captures and scores of admm-epi's fit (research/fit_epi.py)
+
+# the captures and scores of admm-epi's fit (research/fit_epi.py)
+from fit_epi import add_capture_arguments, captures_against_malvar, parse_capture_arguments, scores
 
 import lfcl.solvers.epi as epi
 from lfcl.demosaic.driver import demosaic_grid
@@ -23,30 +25,21 @@ from lfcl.grid.model import AlignedGrid
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", default="0.05,0.1", help="two candidate spacings, the first the reference")
-    parser.add_argument("--scenes", default="charts,deadleaves,finetexture")
-    parser.add_argument("--seeds", default="1,2", help="noise seeds (1, 2: training; others held out)")
-    parser.add_argument("--lux", default="0.5,2,12,50")
-    parser.add_argument("--lenses", type=int, default=48, help="lenses per side of every capture")
-    args = parser.parse_args()
+    add_capture_arguments(parser)
+    args = parse_capture_arguments(parser.parse_args())
     steps = tuple(float(v) for v in args.steps.split(","))
     rows = {step: [] for step in steps}
-    for scene in args.scenes.split(","):
-        for seed in (int(v) for v in args.seeds.split(",")):
-            for lux in (float(v) for v in args.lux.split(",")):
-                cap = capture(scene, seed, lux, args.lenses)
-                noise = noise_of(cap)
-                malvar = scores(demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), "malvar").planes,
-                                cap.truth)
-                for step in steps:
-                    epi.EPI_DEPTH_OPTIONS = {**epi.EPI_DEPTH_OPTIONS, "step": step}
-                    result = demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), "admm-epi", noise=noise)
-                    got = scores(result.planes, cap.truth)
-                    rows[step].append((got["psnr_center"] - malvar["psnr_center"],
-                                       got["psnr_mean"] - malvar["psnr_mean"], result.seconds,
-                                       result.part_seconds["disparity"]))
-                    print(f"{scene} seed {seed} {lux:g} lux step {step:g}: centre {rows[step][-1][0]:+.3f}, mean image "
-                          f"{rows[step][-1][1]:+.3f} dB, {result.iterations} iterations, {result.seconds:.2f} s",
-                          flush=True)
+    for scene, seed, lux, cap, noise, malvar in captures_against_malvar(args):
+        for step in steps:
+            epi.EPI_DEPTH_OPTIONS = {**epi.EPI_DEPTH_OPTIONS, "step": step}
+            result = demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), "admm-epi", noise=noise)
+            got = scores(result.planes, cap.truth)
+            rows[step].append((got["psnr_center"] - malvar["psnr_center"],
+                               got["psnr_mean"] - malvar["psnr_mean"], result.seconds,
+                               result.part_seconds["disparity"]))
+            print(f"{scene} seed {seed} {lux:g} lux step {step:g}: centre {rows[step][-1][0]:+.3f}, mean image "
+                  f"{rows[step][-1][1]:+.3f} dB, {result.iterations} iterations, {result.seconds:.2f} s",
+                  flush=True)
     for step, values in rows.items():
         v = np.array(values)
         print(f"step {step:g}: centre gain mean {v[:, 0].mean():+.3f} worst {v[:, 0].min():+.3f} dB, mean image mean "

@@ -11,7 +11,9 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from fit_epi import capture, noise_of, scores  # the captures and scores of admm-epi's fit (research/fit_epi.py)
+
+# the captures and scores of admm-epi's fit (research/fit_epi.py)
+from fit_epi import add_capture_arguments, captures_against_malvar, parse_capture_arguments, scores
 
 import lfcl.solvers.epi as epi
 from lfcl.demosaic.driver import demosaic_grid
@@ -21,30 +23,21 @@ from lfcl.grid.model import AlignedGrid
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--values", default="0,0.01", help="EPI_PROXIMAL values, the first the reference")
-    parser.add_argument("--scenes", default="charts,deadleaves,finetexture")
-    parser.add_argument("--seeds", default="1,2", help="noise seeds (1, 2: training; others held out)")
-    parser.add_argument("--lux", default="0.5,2,12,50")
-    parser.add_argument("--lenses", type=int, default=48)
-    args = parser.parse_args()
+    add_capture_arguments(parser)
+    args = parse_capture_arguments(parser.parse_args())
     values = tuple(float(v) for v in args.values.split(","))
     rows = {value: [] for value in values}
-    for scene in args.scenes.split(","):
-        for seed in (int(v) for v in args.seeds.split(",")):
-            for lux in (float(v) for v in args.lux.split(",")):
-                cap = capture(scene, seed, lux, args.lenses)
-                noise = noise_of(cap)
-                malvar = scores(demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), "malvar").planes,
-                                cap.truth)
-                for value in values:
-                    epi.EPI_PROXIMAL = value
-                    result = demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), "admm-epi", noise=noise)
-                    got = scores(result.planes, cap.truth)
-                    peak = float(np.abs(result.planes).max()) / float(cap.truth.max())
-                    rows[value].append((got["psnr_center"] - malvar["psnr_center"],
-                                        got["psnr_mean"] - malvar["psnr_mean"], peak, result.seconds))
-                    print(f"{scene} seed {seed} {lux:g} lux proximal {value:g}: centre {rows[value][-1][0]:+.3f}, "
-                          f"mean image {rows[value][-1][1]:+.3f} dB, largest value {peak:.2f}x the truth's, "
-                          f"{result.iterations} iterations, {result.seconds:.2f} s", flush=True)
+    for scene, seed, lux, cap, noise, malvar in captures_against_malvar(args):
+        for value in values:
+            epi.EPI_PROXIMAL = value
+            result = demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), "admm-epi", noise=noise)
+            got = scores(result.planes, cap.truth)
+            peak = float(np.abs(result.planes).max()) / float(cap.truth.max())
+            rows[value].append((got["psnr_center"] - malvar["psnr_center"],
+                                got["psnr_mean"] - malvar["psnr_mean"], peak, result.seconds))
+            print(f"{scene} seed {seed} {lux:g} lux proximal {value:g}: centre {rows[value][-1][0]:+.3f}, "
+                  f"mean image {rows[value][-1][1]:+.3f} dB, largest value {peak:.2f}x the truth's, "
+                  f"{result.iterations} iterations, {result.seconds:.2f} s", flush=True)
     for value, v in rows.items():
         v = np.array(v)
         print(f"proximal {value:g}: centre gain mean {v[:, 0].mean():+.3f} worst {v[:, 0].min():+.3f} dB, mean image "

@@ -484,6 +484,15 @@ def parse_capture_arguments(args):
     return args
 
 
+def captures_against_malvar(args):
+    """Every capture of :func:`parse_capture_arguments`'s lists, with its noise model and Malvar's scores:
+    (scene, seed, lux, capture, noise, Malvar's scores)."""
+    for scene, seed, lux in itertools.product(args.scenes, args.seeds, args.lux):
+        cap = capture(scene, seed, lux, args.lenses)
+        malvar = scores(demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), "malvar").planes, cap.truth)
+        yield scene, seed, lux, cap, noise_of(cap), malvar
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("mode", choices=("trace", "fit", "fast", "table", "format", "profile"))
