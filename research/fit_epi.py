@@ -493,6 +493,36 @@ def captures_against_malvar(args):
         yield scene, seed, lux, cap, noise_of(cap), malvar
 
 
+def compare_settings(args, name: str, values, apply):
+    """admm-epi as ``lfcl process`` runs it under two (or more) values of one setting, ``apply(value)`` putting each in
+    place, on every capture of ``args`` (:func:`captures_against_malvar`): per capture and in sum, the centre-view and
+    mean-image gains over Malvar, the largest value written (in units of the truth's largest), the iterations and
+    seconds (the disparity's apart), and the gains' differences from the first value."""
+    rows = {value: [] for value in values}
+    for scene, seed, lux, cap, noise, malvar in captures_against_malvar(args):
+        for value in values:
+            apply(value)
+            result = demosaic_grid(cap.mosaic, cap.pattern, AlignedGrid(cap.pitch), "admm-epi", noise=noise)
+            got = scores(result.planes, cap.truth)
+            peak = float(np.abs(result.planes).max()) / float(cap.truth.max())
+            rows[value].append((got["psnr_center"] - malvar["psnr_center"], got["psnr_mean"] - malvar["psnr_mean"],
+                                peak, result.seconds, result.part_seconds["disparity"]))
+            print(f"{scene} seed {seed} {lux:g} lux {name} {value:g}: centre {rows[value][-1][0]:+.3f}, mean image "
+                  f"{rows[value][-1][1]:+.3f} dB, largest value {peak:.2f}x the truth's, {result.iterations} "
+                  f"iterations, {result.seconds:.2f} s", flush=True)
+    for value, v in rows.items():
+        v = np.array(v)
+        print(f"{name} {value:g}: centre gain mean {v[:, 0].mean():+.3f} worst {v[:, 0].min():+.3f} dB, mean image mean "
+              f"{v[:, 1].mean():+.3f} worst {v[:, 1].min():+.3f} dB, largest value {v[:, 2].max():.2f}x the truth's, "
+              f"{v[:, 3].mean():.2f} s (disparity {v[:, 4].mean():.3f} s)")
+    first = np.array(rows[values[0]])
+    for other in values[1:]:
+        for column, label in ((0, "centre"), (1, "mean image")):
+            diff = np.array(rows[other])[:, column] - first[:, column]
+            print(f"{label}, {other:g} - {values[0]:g}: mean {diff.mean():+.3f}, {diff.min():+.3f}..{diff.max():+.3f} dB")
+    return rows
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("mode", choices=("trace", "fit", "fast", "table", "format", "profile"))
