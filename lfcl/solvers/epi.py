@@ -201,8 +201,9 @@ def epi_solver_bytes(sensor_shape, fallback: bool, cross_channel: bool = False) 
     planes = 3 * H * W
     blocks = 2 if fallback else 1
     # planes: the start, x, previous x, rhs, K^T z, 4 CG vectors; K x scratch (2 planes); z, u per block (2 x 2
-    # planes); per block the rays (d, w per sample); the mosaic and diag(K^T K)
-    floats = 9 * planes + 2 * planes + blocks * (4 * planes + 2 * H * W) + 2 * H * W
+    # planes); per block the rays (d, w per sample); the mosaic and diag(K^T K); the fused CG step's 3 partial sums
+    # per run of 16 columns (CgSteps)
+    floats = 9 * planes + 2 * planes + blocks * (4 * planes + 2 * H * W) + 2 * H * W + 3 * H * -(-W // 16)
     if cross_channel:  # z, u and the K x scratch ([2, 2, H, W] each) and diag(D^T D) [H, W]
         floats += 3 * 4 * H * W + H * W
     return 4 * floats
