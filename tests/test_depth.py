@@ -54,6 +54,80 @@ def test_device_half_apertures_in_one_gather_match_numpy(runtime, rng, S, T, U, 
         op.forward(runtime.to_device(mosaic), (1e-3, 1e-4), 0.55, views=(0, 1, 0, 1))
 
 
+# Frames with an interior box (lenses whose every tap lies inside the frame), which depth_cost_interior gathers 8 lenses
+# of a row at a time, beside the frame's edge and the box's last columns, which depth_cost gathers; odd and even
+# pitch, the half apertures, a crop origin, and saturated samples inside the box (the lenses that reach them go to
+# depth_cost).
+@pytest.mark.parametrize("S, T, U, V, model, halves, origin, views", [
+    (16, 30, 9, 9, "plane", True, (0, 0), None), (12, 29, 5, 5, "plane", False, (1, 0), None),
+    (10, 27, 4, 6, "mean", False, (0, 1), None), (12, 26, 5, 5, "plane", False, (0, 0), (1, 3, 0, 2)),
+    (10, 27, 4, 6, "plane", True, (1, 1), None)], ids=str)
+def test_device_cost_volume_interior_box_matches_numpy(runtime, rng, S, T, U, V, model, halves, origin, views):
+    mosaic = rng.uniform(0.05, 0.5, (S * U, T * V)).astype(np.float32)
+    ds = np.array([-1.3, -0.5, 0.0, 0.35, 1.0], np.float32)
+    op = CostVolume(runtime, mosaic.shape, "GRBG", (U, V), ds, origin=origin, model=model, halves=halves)
+    s0, s1, t0, t1 = op.box
+    assert s1 > s0 and t1 - t0 >= 8, op.box
+    # Two saturated samples: one inside the box, one in the edge ring.
+    mosaic[(s0 + (s1 - s0) // 2) * U + 1, (t0 + 3) * V + V - 1] = 0.97
+    mosaic[1, 2] = 0.99
+    apertures = [None, *half_apertures(U, V)] if halves else [views]
+    expected = np.stack([cost_volume_np(mosaic, "GRBG", (U, V), ds, origin=origin, noise=(1e-3, 1e-4),
+                                        saturation=0.9, model=model, views=a) for a in apertures])
+    got = op.forward(runtime.to_device(mosaic), (1e-3, 1e-4), 0.9, None if halves else views).get()
+    got = got if halves else got[None]
+    np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-5 * np.abs(expected).max())
+    # Both kernels ran: the box, and the lenses listed for depth_cost (the ring, and those reaching the sample).
+    listed = op._listed(runtime.to_device(mosaic), np.float32(0.9))
+    inside = [(i // T, i % T) for i in listed if s0 <= i // T < s1 and t0 <= i % T < t1]
+    assert inside and len(inside) < (s1 - s0) * (t1 - t0)
+
+
+def test_view_major_copy_and_unusable_lenses_match_numpy(runtime, rng):
+    S, T, U, V = 3, 5, 4, 3
+    mosaic = rng.uniform(0.0, 0.5, (S * U, T * V)).astype(np.float32)
+    mosaic[5, 7] = 0.95  # lens (1, 2)
+    mosaic[0, 14] = np.nan  # lens (0, 4)
+    op = CostVolume(runtime, mosaic.shape, "RGGB", (U, V), [0.0])
+    data = runtime.to_device(mosaic)
+    np.testing.assert_array_equal(op.view_major(data).get().reshape(U, V, S, T),
+                                  mosaic.reshape(S, U, T, V).transpose(1, 3, 0, 2))
+    want = np.zeros((S, T), bool)
+    want[1, 2] = want[0, 4] = True
+    np.testing.assert_array_equal(op.unusable_lenses(data, 0.9), want)
+    not_a_number = np.zeros((S, T), bool)
+    not_a_number[0, 4] = True
+    np.testing.assert_array_equal(op.unusable_lenses(data, np.inf), not_a_number)
+
+
+def test_cost_geometry_holds_the_sums_of_an_interior_lens(rng):
+    """The table's 12 sums per colour are the twin's (rows 0-5 and 10-15 of its ``acc``), for a lens of each parity."""
+    from lfcl.depth.cost import cost_geometry, tap_reach
+    from lfcl.layout import packed_pattern
+
+    U = V = 5
+    ds = np.array([-0.7, 0.0, 0.45], np.float32)
+    row_lo, row_hi, col_lo, col_hi = tap_reach(ds, U, V)
+    assert (row_lo, row_hi, col_lo, col_hi) == (-2, 2, -2, 2)
+    table = cost_geometry(ds, U, V, packed_pattern("RGGB"), [(0, U - 1, 0, V - 1)])
+    # By the definition: every tap of lens (s, t) with its bilinear weight, under its own colour.
+    for k, d in enumerate(ds):
+        for s, t in ((6, 6), (6, 7), (7, 6), (7, 7)):
+            want = np.zeros((3, 12))
+            for u in range(U):
+                for v in range(V):
+                    y, x = s - float(d) * (u - 2), t - float(d) * (v - 2)
+                    for sp in (int(np.floor(y)), int(np.floor(y)) + 1):
+                        for tp in (int(np.floor(x)), int(np.floor(x)) + 1):
+                            w = max(0.0, 1 - abs(sp - y)) * max(0.0, 1 - abs(tp - x))
+                            py, px = sp - y, tp - x
+                            c = {"R": 0, "G": 1, "B": 2}["RGGB"[2 * ((sp * U + u) % 2) + (tp * V + v) % 2]]
+                            phi = np.array([1, py, px, py * py, px * px, py * px])
+                            want[c, :6] += w * phi
+                            want[c, 6:] += w * w * phi
+            np.testing.assert_allclose(table[k, 0, 2 * (s % 2) + t % 2], want, atol=1e-5)
+
+
 def test_half_apertures_hold_the_centre_rows_and_columns():
     assert half_apertures(9, 9) == [(0, 4, 0, 8), (4, 8, 0, 8), (0, 8, 0, 4), (0, 8, 4, 8)]
     assert half_apertures(4, 4) == [(0, 2, 0, 3), (1, 3, 0, 3), (0, 3, 0, 2), (0, 3, 1, 3)]
@@ -289,7 +363,10 @@ def test_smoothing_fills_unknown_lenses_from_their_neighbours(rng):
     assert np.abs(smooth.disparity[hole] - plain.disparity[hole]).max() > 1e-3
 
 
-@pytest.mark.parametrize("planes, lenses, radius", [(1, (1, 1), 0), (3, (5, 7), 1), (4, (9, 6), 4), (2, (3, 2), 4), (19, (4, 5), 2)])
+# The kernel takes 8 lenses of a row at once: rows of 16 and 27 lenses hold whole blocks inside the frame, blocks
+# whose window runs past a side, and a last block of 3.
+@pytest.mark.parametrize("planes, lenses, radius", [(1, (1, 1), 0), (3, (5, 7), 1), (4, (9, 6), 4), (2, (3, 2), 4),
+                                                    (19, (4, 5), 2), (9, (3, 16), 2), (5, (6, 27), 4)])
 def test_device_window_aggregation_matches_numpy(runtime, rng, planes, lenses, radius):
     from lfcl.depth.cost import WindowAggregate, aggregate_window_np, window_offsets
 

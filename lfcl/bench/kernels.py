@@ -127,7 +127,7 @@ def lens_solve_np(rhs: np.ndarray, blocks: np.ndarray, pitch) -> np.ndarray:
     return np.ascontiguousarray(out.reshape(C, S, T, U, V).transpose(0, 1, 3, 2, 4).reshape(C, H, W))
 
 
-def buffer_specs(height: int, width: int) -> dict:
+def buffer_specs(height: int, width: int, pitch=None) -> dict:
     """Every buffer the cases use: key -> (shape, low, high); low None = an output, no host copy."""
     planes, mosaic = (3, height, width), (height, width)
     specs = {
@@ -142,6 +142,12 @@ def buffer_specs(height: int, width: int) -> dict:
     for dims in DIM_SETS:
         specs[f"g_{dims}"] = ((len(dims), *planes), -0.5, 0.5)
         specs[f"g2_{dims}"] = ((len(dims), *planes), -0.5, 0.5)
+    if pitch is not None and height % pitch[0] == 0 and width % pitch[1] == 0:  # the disparity's (depth_cases)
+        lenses, ND = (height // pitch[0], width // pitch[1]), DEPTH_CANDIDATES.size
+        specs["cost"] = ((5, 2, ND, *lenses), None, None)
+        specs["cost_aperture"] = ((2 * ND, *lenses), -1.0, 1.0)
+        specs["window_weights"] = (((2 * DEPTH_RADIUS + 1) ** 2, *lenses), 0.0, 1.0)
+        specs["cost_sums"] = ((2 * ND, *lenses), None, None)
     return specs
 
 
@@ -226,6 +232,34 @@ def epi_cases(runtime, sensor, pitch) -> list[Case]:
         Case("D_epi^T", "epi.cl:epi_adjoint", "read 2P + write P", 3 * P, ("g_uv", "y"),
              lambda d: op.adjoint(d["g_uv"], out=d["y"]),
              lambda h: epi_adjoint_np(h["g_uv"], disparity, pitch, matrix=twin_matrix())),
+    ]
+
+
+DEPTH_CANDIDATES = np.round(np.arange(-2.0, 2.0 + 1e-9, 0.2), 6)  # admm-epi's disparity search at 2 lux
+DEPTH_RADIUS = 4  # the window of lfcl.depth.estimate's defaults
+
+
+def depth_cases(runtime, sensor, pitch) -> list[Case]:
+    """The disparity's two heavy kernels (lfcl/depth/cost.py), as admm-epi's search at 2 lux runs them: the cost
+    volume of the full and the four half apertures in one gather (no sample saturated, so the lenses away from the
+    frame's edge take the interior kernel) and the window sums of one aperture. The cost volume has no numpy
+    column: its twin (``cost_volume_np``, per lens and colour in float64) takes minutes at this size;
+    tests/test_depth.py checks the kernels against it."""
+    from ..depth.cost import CostVolume, WindowAggregate, aggregate_window_np, window_offsets
+
+    S, T = sensor[0] // pitch[0], sensor[1] // pitch[1]
+    ND, L = DEPTH_CANDIDATES.size, S * T
+    volume = CostVolume(runtime, sensor, PATTERN, pitch, DEPTH_CANDIDATES, halves=True)
+    window = WindowAggregate(runtime, 2 * ND, (S, T), DEPTH_RADIUS)
+    offsets = window_offsets(DEPTH_RADIUS)
+    return [
+        Case("depth cost, 5 apertures", "depth.cl:depth_cost_interior + depth_cost", f"read N + write {10 * ND}L",
+             sensor[0] * sensor[1] + 10 * ND * L, ("b", "cost"),
+             lambda d: volume.forward(d["b"], (1e-4, 1e-6), np.inf, out=d["cost"]), None),
+        Case("depth window sums", "depth_aggregate.cl:depth_aggregate", f"read {2 * ND + 81}L + write {2 * ND}L",
+             (4 * ND + 81) * L, ("cost_aperture", "window_weights", "cost_sums"),
+             lambda d: window.forward(d["cost_aperture"], d["window_weights"], out=d["cost_sums"]),
+             lambda h: aggregate_window_np(h["cost_aperture"], offsets, h["window_weights"])),
     ]
 
 
@@ -318,6 +352,8 @@ def build_cases(runtime, height: int, width: int, pitch) -> list[Case]:
         cases += admm_cases(dims)
         if dims == "uv" and height % U == 0 and width % V == 0:  # the same [2, 3, H, W] buffers
             cases += epi_cases(runtime, sensor, pitch)
+    if height % U == 0 and width % V == 0:
+        cases += depth_cases(runtime, sensor, pitch)
 
     cases += [
         Case("dot", "reduce.cl:dot_partials", "read 2P", 2 * P, ("x", "x2"),
@@ -393,7 +429,7 @@ def run(runtime, size, pitch=(9, 9), repeats: int = 5, numpy_repeats: int = 1, o
         if not wanted:
             raise ValueError(f"no kernel matches {', '.join(only)}; kernels: {', '.join(c.name for c in cases)}")
         cases = [cases[0]] + [c for c in wanted if c is not cases[0]]  # the copy reference always runs
-    specs = buffer_specs(height, width)
+    specs = buffer_specs(height, width, pitch)
     _check_memory(runtime, specs, cases, (height, width))
     pool = _Pool(runtime, specs)
     queue = runtime.queue

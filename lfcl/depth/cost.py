@@ -70,6 +70,13 @@ def _views(views, U, V) -> tuple[int, int, int, int]:
     return u_lo, u_hi, v_lo, v_hi
 
 
+def _taps(d, offset):
+    """The floor and fraction of the taps of a view ``offset`` views from the centre at disparity ``d``:
+    ``-d * offset`` rounded to float32 (as the kernels compute it), then split exactly (float64)."""
+    shift = float(np.float32(-np.float32(d)) * np.float32(offset))
+    return np.floor(shift), shift - np.floor(shift)
+
+
 def _solve_stats(acc, ref, gain, floor, plane: bool):
     """excess and weight from the per-colour sums ``acc[16, 3, ...]`` of values less ``ref`` (see
     :func:`cost_volume_np`)."""
@@ -122,14 +129,11 @@ def cost_volume_np(mosaic, pattern: str, pitch, disparities, *, origin=(0, 0), n
     for k, d in enumerate(disparities):
         acc = np.zeros((16, 3, S, T))
         for u in range(u_lo, u_hi + 1):
-            ys = s_idx - np.float32(d) * np.float32(u - uc)  # float32 like the kernel
-            ys = ys.astype(np.float32).astype(np.float64)
-            y0 = np.floor(ys)
-            fy = ys - y0
+            y0, fy = _taps(d, u - uc)  # the taps' floor and fraction as the kernels compute them
+            y0, fy = s_idx + y0, np.full(S, fy)
             for v in range(v_lo, v_hi + 1):
-                xs = (t_idx - np.float32(d) * np.float32(v - vc)).astype(np.float32).astype(np.float64)
-                x0 = np.floor(xs)
-                fx = xs - x0
+                x0, fx = _taps(d, v - vc)
+                x0, fx = t_idx + x0, np.full(T, fx)
                 for a in (0, 1):
                     sp = (y0 + a).astype(int)
                     wy = fy if a else 1.0 - fy
@@ -160,12 +164,62 @@ def cost_volume_np(mosaic, pattern: str, pitch, disparities, *, origin=(0, 0), n
     return out.astype(np.float32)
 
 
+COST_LANES = 8  # lenses per work-item of depth_cost_interior (lfcl/kernels/depth.cl)
+
+
+def tap_reach(disparities, U: int, V: int) -> tuple[int, int, int, int]:
+    """The lens rows and columns, relative to a lens, that its taps read at any of ``disparities``:
+    ``(row_lo, row_hi, col_lo, col_hi)``, inclusive (the second tap of each pair included, weight 0 or not)."""
+    floors = [[_taps(d, n - (N - 1) / 2.0)[0] for d in np.asarray(disparities, np.float32).ravel() for n in range(N)]
+              for N in (U, V)]
+    return int(min(floors[0])), int(max(floors[0])) + 1, int(min(floors[1])), int(max(floors[1])) + 1
+
+
+def cost_geometry(disparities, U: int, V: int, packed: int, apertures) -> np.ndarray:
+    """The sums of the cost that depend only on the taps' places and weights, for a lens all of whose taps are
+    inside the frame and unsaturated: ``[ND, apertures, 4 parities (2 (s & 1) + (t & 1)), 3 colours, 12]``
+    float32, the 12 being W, Sy, Sx, Syy, Sxx, Syx and their w^2 twins Q, Qy, Qx, Qyy, Qxx, Qyx
+    (:func:`cost_volume_np`'s ``acc`` rows 0-5 and 10-15). ``packed`` the kernels' packed pattern,
+    ``apertures`` a list of ``(u_lo, u_hi, v_lo, v_hi)``. depth_cost_interior adds the value sums."""
+    ds = np.asarray(disparities, np.float32).ravel()
+    # Per candidate k and view u (v): the taps' floor and fraction, as the kernels compute them.
+    y0, fy = (np.array([[_taps(d, u - (U - 1) / 2.0)[i] for u in range(U)] for d in ds]) for i in (0, 1))
+    x0, fx = (np.array([[_taps(d, v - (V - 1) / 2.0)[i] for v in range(V)] for d in ds]) for i in (0, 1))
+    u, v = np.arange(U), np.arange(V)
+    masks = np.zeros((len(apertures), U, V))
+    for n, (u_lo, u_hi, v_lo, v_hi) in enumerate(apertures):
+        masks[n, u_lo:u_hi + 1, v_lo:v_hi + 1] = 1.0
+    cells = np.array([(int(packed) >> (2 * i)) & 3 for i in range(4)]).reshape(2, 2)
+    out = np.zeros((ds.size, len(apertures), 4, 3, 12))
+    for a in (0, 1):
+        for b in (0, 1):
+            wy, py = (fy if a else 1.0 - fy)[:, :, None], (a - fy)[:, :, None]  # [ND, U, 1]
+            wx, px = (fx if b else 1.0 - fx)[:, None, :], (b - fx)[:, None, :]  # [ND, 1, V]
+            w = wy * wx
+            phi = [np.broadcast_to(f, w.shape) for f in (1.0, py, px, py * py, px * px, py * px)]
+            feats = np.stack([w * f for f in phi] + [w * w * f for f in phi])  # [12, ND, U, V]
+            for ps in (0, 1):
+                rows = ((ps + y0 + a).astype(np.int64) * U + u) & 1  # [ND, U]
+                for pt in (0, 1):
+                    cols = ((pt + x0 + b).astype(np.int64) * V + v) & 1  # [ND, V]
+                    colour = cells[rows[:, :, None], cols[:, None, :]]  # [ND, U, V]
+                    onehot = (colour[None] == np.arange(3)[:, None, None, None]).astype(np.float64)
+                    out[:, :, 2 * ps + pt] += np.einsum("ckuv,nuv,jkuv->kncj", onehot, masks, feats)
+    return out.astype(np.float32)
+
+
 class CostVolume:
     """The cost volume on the device (``lfcl/kernels/depth.cl``) for an ``[S*U, T*V]`` mosaic.
 
     ``halves``: one gather gives the full aperture's volume and those of the four :func:`half_apertures`,
     ``[5, 2, ND, S, T]`` (the twin: :func:`cost_volume_np` of each aperture); the shared views are gathered once
-    (at 128x128 lenses, 41 candidates, 2-core PoCL: docs/depth.md, "Timing")."""
+    (at 128x128 lenses, 41 candidates, 2-core PoCL: docs/depth.md, "Timing").
+
+    Two kernels share the lenses: ``depth_cost_interior`` the box of lenses whose taps all lie inside the frame (at
+    every candidate), 8 lenses along a row per work-item on a view-major copy of the mosaic, with the sums that do
+    not depend on the samples' values from a table (:func:`cost_geometry`); ``depth_cost`` the rest (the frame's
+    edge, the box's last columns, and lenses whose taps reach a saturated sample), one lens per work-item
+    (docs/depth.md, "Timing")."""
 
     def __init__(self, runtime, sensor_shape, pattern: str, pitch, disparities, *, origin=(0, 0),
                  model: str = "plane", halves: bool = False):
@@ -180,12 +234,57 @@ class CostVolume:
         self._disparities = runtime.to_device(self.disparities)
         self.halves = bool(halves)
         self.shape = (5,) * self.halves + (2, self.disparities.size, self.S, self.T)
+        self.reach = tap_reach(self.disparities, self.U, self.V)
+        row_lo, row_hi, col_lo, col_hi = self.reach
+        # The interior box: every tap inside the frame; its width a whole number of work-items.
+        self.box = (max(0, -row_lo), min(self.S, self.S - row_hi), max(0, -col_lo), min(self.T, self.T - col_hi))
+        s0, s1, t0, t1 = self.box
+        self.box = (s0, s1, t0, t0 + max(0, t1 - t0) // COST_LANES * COST_LANES) if s1 > s0 else (0, 0, 0, 0)
+        self._geometry = {}
+
+    def _defines(self):
+        from ..device import grid_defines
+
+        return (*grid_defines((self.U, self.V), 0), ("PLANE_MODEL", self.plane), ("RIDGE_PPM", round(RIDGE * 1e6)),
+                ("MIN_WEIGHT_PPM", round(MIN_WEIGHT * 1e6)), ("HALVES", int(self.halves)))
+
+    def view_major(self, mosaic):
+        """The view-major copy ``[U*V, S, T]`` (views[u V + v][s][t]) of an ``[S*U, T*V]`` device mosaic, on the device
+        (depth_cost_interior reads it; the twin: ``mosaic.reshape(S, U, T, V).transpose(1, 3, 0, 2)``)."""
+        out = self.runtime.empty((self.U * self.V, self.S, self.T))
+        self.runtime.launch("depth", "depth_views", (self.T * self.V, self.S * self.U), mosaic.data, out.data,
+                            np.int32(self.S), np.int32(self.T), defines=self._defines())
+        return out
+
+    def unusable_lenses(self, mosaic, saturation) -> np.ndarray:
+        """``[S, T]`` bool on the host: the lenses holding a sample the cost leaves out (at or above ``saturation``,
+        or not a number; the twin: ``~(mosaic.reshape(S, U, T, V) < saturation).all(axis=(1, 3))``)."""
+        flags = self.runtime.empty((self.S, self.T), np.uint8)
+        self.runtime.launch("depth", "depth_lens_unusable", (self.T, self.S), mosaic.data, flags.data,
+                            np.int32(self.S), np.int32(self.T), np.float32(saturation), defines=self._defines())
+        return flags.get().astype(bool)
+
+    def _listed(self, mosaic, saturation):
+        """Flat indices (s T + t) of the lenses for depth_cost: outside the box, or reaching an unusable sample."""
+        S, T = self.S, self.T
+        s0, s1, t0, t1 = self.box
+        general = np.ones((S, T), bool)
+        general[s0:s1, t0:t1] = False
+        if s1 > s0 and t1 > t0:
+            bad = self.unusable_lenses(mosaic, saturation)
+            if bad.any():  # the lenses whose taps reach a flagged lens: a box sum of the flags over the reach
+                row_lo, row_hi, col_lo, col_hi = self.reach
+                pad = np.pad(bad, ((-row_lo, row_hi), (-col_lo, col_hi))).astype(np.int32).cumsum(0).cumsum(1)
+                pad = np.pad(pad, ((1, 0), (1, 0)))
+                h, w = row_hi - row_lo + 1, col_hi - col_lo + 1
+                near = pad[h:h + S, w:w + T] - pad[:S, w:w + T] - pad[h:h + S, :T] + pad[:S, :T]
+                general |= near > 0
+        return np.flatnonzero(general).astype(np.int32)
 
     def forward(self, mosaic, noise=(0.0, 1.0), saturation: float = np.inf, views=None, out=None):
         """``[S*U, T*V]`` float32 device mosaic -> ``[2, ND, S, T]`` float32 device cost volume
         (``views``: as :func:`cost_volume_np`), or with ``halves`` ``[5, 2, ND, S, T]``: the full aperture,
         then the four :func:`half_apertures` (no ``views``)."""
-        from ..device import grid_defines
         from ..ops import check_device_array, output
 
         check_device_array(mosaic, self.sensor_shape, "mosaic")
@@ -198,14 +297,26 @@ class CostVolume:
         if self.halves and views is not None:
             raise ValueError("a cost volume with the half apertures gathers every view: no views")
         u_lo, u_hi, v_lo, v_hi = _views(views, self.U, self.V)
-        self.runtime.launch(
-            "depth", "depth_cost", (self.T, self.S, self.disparities.size), mosaic.data, self._disparities.data,
-            out.data, np.int32(self.S), np.int32(self.T), np.int32(self.disparities.size), self.pattern,
-            np.float32(gain), np.float32(floor), sat, np.int32(u_lo), np.int32(u_hi), np.int32(v_lo), np.int32(v_hi),
-            defines=(*grid_defines((self.U, self.V), 0), ("PLANE_MODEL", self.plane),
-                     ("RIDGE_PPM", round(RIDGE * 1e6)), ("MIN_WEIGHT_PPM", round(MIN_WEIGHT * 1e6)),
-                     ("HALVES", int(self.halves))),
-        )
+        S, T, ND = self.S, self.T, self.disparities.size
+        common = (np.int32(S), np.int32(T), np.int32(ND), self.pattern, np.float32(gain), np.float32(floor))
+        view_range = (np.int32(u_lo), np.int32(u_hi), np.int32(v_lo), np.int32(v_hi))
+        s0, s1, t0, t1 = self.box
+        if s1 > s0 and t1 > t0:
+            key = (u_lo, u_hi, v_lo, v_hi)
+            if key not in self._geometry:
+                apertures = [key, *half_apertures(self.U, self.V)] if self.halves else [key]
+                self._geometry[key] = self.runtime.to_device(
+                    cost_geometry(self.disparities, self.U, self.V, self.pattern, apertures))
+            view_major = self.view_major(mosaic)
+            self.runtime.launch("depth", "depth_cost_interior", ((t1 - t0) // COST_LANES, s1 - s0, ND),
+                                view_major.data, self._disparities.data, self._geometry[key].data, out.data, *common,
+                                np.int32(s0), np.int32(t0), *view_range, defines=self._defines())
+        listed = self._listed(mosaic, sat)
+        if listed.size:
+            lenses = self.runtime.to_device(listed)
+            self.runtime.launch("depth", "depth_cost", (listed.size, ND), mosaic.data, self._disparities.data,
+                                lenses.data, out.data, np.int32(listed.size), *common, sat, *view_range,
+                                defines=self._defines())
         return out
 
 
@@ -228,6 +339,7 @@ def aggregate_window_np(maps: np.ndarray, offsets, weights: np.ndarray) -> np.nd
 
 
 AGGREGATE_CHUNK = 8  # planes per work-item of lfcl/kernels/depth_aggregate.cl
+AGGREGATE_LANES = 8  # lenses along a row per work-item of it
 
 
 class WindowAggregate:
@@ -257,7 +369,7 @@ class WindowAggregate:
         check_device_array(weights, self.weights_shape, "weights")
         out = output(self.runtime, out, self.maps_shape)
         chunks = -(-self.planes // AGGREGATE_CHUNK)
-        self.runtime.launch("depth_aggregate", "depth_aggregate", (self.T, self.S, chunks), maps.data, weights.data,
+        self.runtime.launch("depth_aggregate", "depth_aggregate", (-(-self.T // AGGREGATE_LANES), self.S, chunks), maps.data, weights.data,
                             out.data, np.int32(self.S), np.int32(self.T), np.int32(self.planes),
                             np.int32(self.radius), np.int32(first),
                             defines=(*grid_defines((1, 1), 0), ("CHUNK", AGGREGATE_CHUNK)))

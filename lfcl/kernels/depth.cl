@@ -1,7 +1,7 @@
 // Photo-consistency cost volume for disparity from a lenslet mosaic (lfcl/depth/cost.py has the
 // derivation and the numpy twin cost_volume_np).
 //
-// One work-item per (lens t, lens s, candidate k). For every view (u, v) the centre-view lens
+// One work-item per (listed lens, candidate k). For every view (u, v) the centre-view lens
 // (s, t) is seen at the fractional lens (y, x) = (s - d (u - uc), t - d (v - vc)); the raw samples
 // of view (u, v) in the four lenses around it are gathered with bilinear weights, each under its
 // own CFA colour, at centre-view offset p = (s' - y, t' - x). Per colour: weighted sums for a
@@ -14,7 +14,8 @@
 // Without HALVES only the views u_lo <= u <= u_hi, v_lo <= v <= v_hi are gathered (a half aperture sees
 // past an occluder that the other half runs into).
 // Output: cost[a][0][k][s][t] = excess, cost[a][1][k][s][t] = weight of aperture a (one, or five with
-// HALVES). Global size (T, S, ND).
+// HALVES). Global size (count, ND) over the listed lenses (s T + t); depth_cost_interior gathers a
+// box of the others faster, and CostVolume lists the rest here.
 
 #define RIDGE (RIDGE_PPM * 1e-6f)
 #define MIN_WEIGHT (MIN_WEIGHT_PPM * 1e-6f)
@@ -87,16 +88,17 @@ inline float2 aperture_cost(float acc[3][NSUM], const float ref, const float gai
     return (float2)(excess, weight);
 }
 
-__kernel void depth_cost(__global const float *mosaic, __constant float *disparities, __global float *cost,
-                         const int S, const int T, const int ND, const int pattern,
-                         const float gain, const float floor_var, const float saturation,
+__kernel void depth_cost(__global const float *mosaic, __constant float *disparities, __global const int *lenses,
+                         __global float *cost, const int count, const int S, const int T, const int ND,
+                         const int pattern, const float gain, const float floor_var, const float saturation,
                          const int u_lo, const int u_hi, const int v_lo, const int v_hi)
 {
-    const int t = get_global_id(0);
-    const int s = get_global_id(1);
-    const int k = get_global_id(2);
-    if (t >= T || s >= S || k >= ND)
+    const int i = get_global_id(0);
+    const int k = get_global_id(1);
+    if (i >= count || k >= ND)
         return;
+    const int s = lenses[i] / T;
+    const int t = lenses[i] - s * T;
     const int W = T * PITCH_V;
     const float d = disparities[k];
     const float uc = 0.5f * (float)(PITCH_U - 1);
@@ -118,13 +120,13 @@ __kernel void depth_cost(__global const float *mosaic, __constant float *dispari
                 for (int j = 0; j < NSUM; ++j)
                     acc[c][j] = 0.0f;
             for (int u = us.x; u <= us.y; ++u) {
-                const float y = (float)s - d * ((float)u - uc);
-                const float y0 = floor(y);
-                const float fy = y - y0;
+                const float oy = -d * ((float)u - uc);  // the taps' floor and fraction, exact in float32
+                const float y0 = (float)s + floor(oy);
+                const float fy = oy - floor(oy);
                 for (int v = vs.x; v <= vs.y; ++v) {
-                    const float x = (float)t - d * ((float)v - vc);
-                    const float x0 = floor(x);
-                    const float fx = x - x0;
+                    const float ox = -d * ((float)v - vc);
+                    const float x0 = (float)t + floor(ox);
+                    const float fx = ox - floor(ox);
                     for (int a = 0; a < 2; ++a) {
                         const int sp = (int)y0 + a;
                         const float wy = a ? fy : 1.0f - fy;
@@ -184,4 +186,142 @@ __kernel void depth_cost(__global const float *mosaic, __constant float *dispari
         cost[((size_t)a * 2 * ND + k) * plane + s * T + t] = ew.x;
         cost[((size_t)a * 2 * ND + ND + k) * plane + s * T + t] = ew.y;
     }
+}
+
+
+// The interior fast path of depth_cost (lfcl.depth.cost.CostVolume): COST_LANES (8) lenses along t per work-item,
+// on the view-major copy of the mosaic (depth_views), so that one tap of the 8 lenses is one vector load (the
+// kernels here are scalar per work-item on a CPU; the vector types are what fills its SIMD lanes).
+// For a lens whose every tap lies inside the frame and is unsaturated, the sums that depend only on the taps'
+// places and weights (W, the p and p p^T moments and their w^2 twins: 12 of the 16 per colour) are the same for
+// every lens of the same row and column parity: the host tabulates them (`geometry`: [ND][NSUB][4 parities]
+// [3 colours][12], CostVolume's _geometry) and the kernel gathers only the 4 value sums per colour (w x, w x p_y,
+// w x p_x, w x^2), each colour by a lane mask. Global size ((t_hi - t_lo) / COST_LANES, s_hi - s_lo, ND) over a box
+// of such lenses; CostVolume lists the others for depth_cost.
+#define COST_LANES 8
+__kernel void depth_cost_interior(__global const float *views, __constant float *disparities,
+                                  __global const float *geometry, __global float *cost,
+                                  const int S, const int T, const int ND, const int pattern,
+                                  const float gain, const float floor_var, const int s_lo, const int t_lo,
+                                  const int u_lo, const int u_hi, const int v_lo, const int v_hi)
+{
+    const int t0 = t_lo + COST_LANES * get_global_id(0);
+    const int s = s_lo + get_global_id(1);
+    const int k = get_global_id(2);
+    if (t0 + COST_LANES > T || s >= S || k >= ND)
+        return;
+    const size_t plane = (size_t)S * T;
+    const size_t lens = (size_t)s * T + t0;
+    const float d = disparities[k];
+    const float uc = 0.5f * (float)(PITCH_U - 1);
+    const float vc = 0.5f * (float)(PITCH_V - 1);
+    const float8 ref = vload8(0, views + (size_t)((PITCH_U / 2) * PITCH_V + PITCH_V / 2) * plane + lens);
+    // Lane j's column parity is lane 0's, flipped on odd lanes when the pitch is odd.
+    const int8 lane_flip = (int8)(0, 1, 0, 1, 0, 1, 0, 1) * (PITCH_V & 1);
+
+    float8 value[NSUB][3][4];
+    for (int a = 0; a < NSUB; ++a)
+        for (int c = 0; c < 3; ++c)
+            for (int j = 0; j < 4; ++j)
+                value[a][c][j] = (float8)(0.0f);
+
+    for (int ry = 0; ry < NREG; ++ry) {
+        const int2 us = region_views(ry, PITCH_U, u_lo, u_hi);
+        for (int rx = 0; rx < NREG; ++rx) {
+            const int2 vs = region_views(rx, PITCH_V, v_lo, v_hi);
+            float8 acc[3][4];
+            for (int c = 0; c < 3; ++c)
+                for (int j = 0; j < 4; ++j)
+                    acc[c][j] = (float8)(0.0f);
+            for (int u = us.x; u <= us.y; ++u) {
+                const float oy = -d * ((float)u - uc);
+                const float fy = oy - floor(oy);
+                const int sp = s + (int)floor(oy);
+                for (int v = vs.x; v <= vs.y; ++v) {
+                    const float ox = -d * ((float)v - vc);
+                    const float fx = ox - floor(ox);
+                    const int tp = t0 + (int)floor(ox);
+                    __global const float *view = views + (size_t)(u * PITCH_V + v) * plane;
+                    for (int a = 0; a < 2; ++a) {
+                        const float wy = a ? fy : 1.0f - fy;
+                        const float py = (float)a - fy;
+                        const int row_parity = ((sp + a) * PITCH_U + u) & 1;
+                        for (int b = 0; b < 2; ++b) {
+                            const float wx = b ? fx : 1.0f - fx;
+                            const float px = (float)b - fx;
+                            const float8 x = vload8(0, view + (size_t)(sp + a) * T + tp + b) - ref;
+                            const float8 wxv = (wy * wx) * x;
+                            const int8 col_parity = (int8)(((tp + b) * PITCH_V + v) & 1) ^ lane_flip;
+                            const int8 colour = ((int8)(pattern) >> (2 * ((row_parity << 1) | col_parity))) & 3;
+                            for (int c = 0; c < 3; ++c) {
+                                const float8 m = select((float8)(0.0f), wxv, colour == c);
+                                acc[c][0] += m;
+                                acc[c][1] += m * py;
+                                acc[c][2] += m * px;
+                                acc[c][3] += m * x;
+                            }
+                        }
+                    }
+                }
+            }
+            for (int a = 0; a < NSUB; ++a) {
+                const bool holds = a == 0 || (a == 1 && ry <= 1) || (a == 2 && ry >= 1) || (a == 3 && rx <= 1)
+                                   || (a == 4 && rx >= 1);
+                if (holds)
+                    for (int c = 0; c < 3; ++c)
+                        for (int j = 0; j < 4; ++j)
+                            value[a][c][j] += acc[c][j];
+            }
+        }
+    }
+
+    float refs[COST_LANES];
+    vstore8(ref, 0, refs);
+    for (int a = 0; a < NSUB; ++a) {
+        float sums[3][4][COST_LANES];
+        for (int c = 0; c < 3; ++c)
+            for (int j = 0; j < 4; ++j)
+                vstore8(value[a][c][j], 0, sums[c][j]);
+        for (int lane = 0; lane < COST_LANES; ++lane) {
+            const int parity = ((s & 1) << 1) | ((t0 + lane) & 1);
+            __global const float *g = geometry + (((size_t)k * NSUB + a) * 4 + parity) * 3 * 12;
+            float total[3][NSUM];
+            for (int c = 0; c < 3; ++c) {
+                for (int j = 0; j < 6; ++j) {
+                    total[c][j] = g[c * 12 + j];
+                    total[c][10 + j] = g[c * 12 + 6 + j];
+                }
+                for (int j = 0; j < 4; ++j)
+                    total[c][6 + j] = sums[c][j][lane];
+            }
+            const float2 ew = aperture_cost(total, refs[lane], gain, floor_var);
+            cost[((size_t)a * 2 * ND + k) * plane + lens + lane] = ew.x;
+            cost[((size_t)a * 2 * ND + ND + k) * plane + lens + lane] = ew.y;
+        }
+    }
+}
+
+// The view-major copy of an [S*U, T*V] mosaic for depth_cost_interior: views[u][v][s][t]. Global size (T*V, S*U).
+__kernel void depth_views(__global const float *mosaic, __global float *views, const int S, const int T)
+{
+    const int col = get_global_id(0), row = get_global_id(1);
+    if (col >= T * PITCH_V || row >= S * PITCH_U)
+        return;
+    const int s = row / PITCH_U, u = row - s * PITCH_U, t = col / PITCH_V, v = col - t * PITCH_V;
+    views[((size_t)(u * PITCH_V + v) * S + s) * T + t] = mosaic[(size_t)row * T * PITCH_V + col];
+}
+
+// 1 for a lens holding any sample that depth_cost leaves out (at or above `saturation`, or not a number): the
+// lenses whose taps reach it go to depth_cost, not depth_cost_interior. Global size (T, S).
+__kernel void depth_lens_unusable(__global const float *mosaic, __global uchar *flags, const int S, const int T,
+                                  const float saturation)
+{
+    const int t = get_global_id(0), s = get_global_id(1);
+    if (t >= T || s >= S)
+        return;
+    uchar any = 0;
+    for (int u = 0; u < PITCH_U; ++u)
+        for (int v = 0; v < PITCH_V; ++v)
+            any |= !(mosaic[(size_t)(s * PITCH_U + u) * T * PITCH_V + t * PITCH_V + v] < saturation);
+    flags[(size_t)s * T + t] = any;
 }
