@@ -527,13 +527,27 @@ def test_admm_epi_in_bands_matches_the_whole_sensor(runtime, rng):
         demosaic_grid(b, "GRBG", grid, "admm-epi", noise=noise, iterations=2, max_memory=epi_solver_bytes((U, T * V), True))
 
 
-@pytest.mark.parametrize("shape", [(3, 9, 4, 9), (2, 1, 3, 5), (2, 4, 3, 1), (1, 1, 1, 1)])
-def test_offset_table_of_zero_disparity_is_the_general_table(shape):
-    """The fall-back block (d = 0) takes a shortcut through the offset table: the same table as the general rule."""
-    from lfcl.ops.epi import _offset_table, offset_table_np
+@pytest.mark.parametrize("S, T, U, V", [(7, 9, 9, 9), (5, 6, 4, 5), (3, 4, 1, 5), (4, 3, 3, 1), (1, 1, 1, 1)])
+def test_ray_maps_and_tap_spans_on_the_device_match_numpy(runtime, rng, S, T, U, V):
+    """The per-sample maps and the per-lens tap spans that set_maps builds on the device, against their twins,
+    exactly: disparities with whole values (one tap), clamped rays and fractions; pitch 1 on either axis (no u- or
+    v-block: the spans say first > last)."""
+    from lfcl.ops.epi import EpiGradient, lens_tap_spans_np, offset_table, ray_maps_np
 
-    zeros = np.zeros(shape, np.float32)
-    np.testing.assert_array_equal(offset_table_np(zeros), _offset_table(zeros))
+    d = rng.choice([-2.0, -1.0, -0.35, 0.0, 0.5, 1.25, 2.0], size=(S, T)).astype(np.float32)
+    d += rng.uniform(-0.01, 0.01, (S, T)).astype(np.float32) * (rng.random((S, T)) < 0.3)
+    w = rng.random((S, T)).astype(np.float32)
+    op = EpiGradient(runtime, (3, S * U, T * V), (U, V))
+    rays = op.ray_maps(d, w)
+    d_rays, w_rays = ray_maps_np(d, w, (U, V))
+    np.testing.assert_array_equal(rays.get(), np.stack([d_rays.reshape(S * U, T * V), w_rays.reshape(S * U, T * V)]))
+    spans = op.lens_tap_spans(rays)
+    np.testing.assert_array_equal(spans, lens_tap_spans_np(d_rays))
+    assert (U == 1) == bool(np.all(spans[0] > spans[1])) and (V == 1) == bool(np.all(spans[2] > spans[3]))
+    # zero disparity: every tap on the sample's own lens; a block the pitch does not have stays empty (lo > hi)
+    table = offset_table(lens_tap_spans_np(np.zeros((S, U, T, V), np.float32)))
+    for block, exists in ((0, U > 1), (1, V > 1), (2, U > 1), (3, V > 1)):
+        np.testing.assert_array_equal(table[block], [[0, 0] if exists else [0, -1]] * S)
 
 
 def test_epi_default_budget_caps_a_cpu_device_that_shares_the_host_memory():

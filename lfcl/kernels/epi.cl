@@ -10,13 +10,13 @@
 //
 // x at a fractional lens s - d_i: Catmull-Rom (Keys, a = -1/2) cubic interpolation over the 4 lenses
 // floor(p) - 1 .. floor(p) + 2 along s (along t for the v-block), lens indices clamped to the frame.
-// `rays` holds d_i (plane 0) and w_i (plane 1) per sample, [2, H, W]: the host reads them from the lens
-// maps (lfcl/ops/epi.py ray_maps_np), so the twin and the device use the same numbers.
+// `rays` holds d_i (plane 0) and w_i (plane 1) per sample, [2, H, W], read from the lens maps by epi_ray_maps
+// (bit for bit its twin lfcl/ops/epi.py ray_maps_np), so the twin and the device use the same numbers.
 //
 // Both work on runs of 16 columns of one row (col0 .. col0 + 15, one SIMD register on a CPU, as
 // gradient.cl). The lanes of a run have their own disparities, so instead of gathering per lane, a
 // kernel loops over the few lens offsets m that any lane's taps reach (`offsets`, tabulated per lens row
-// by the host, lfcl/ops/epi.py offset_table_np) and adds, per lane, the summed weight of its taps on that
+// by the host from epi_lens_tap_spans, lfcl/ops/epi.py offset_table) and adds, per lane, the summed weight of its taps on that
 // lens times one contiguous 16-column load: vector loads only.
 //
 //   forward, u-block: x(s - d, t, u + 1, v) = sum_m [taps on lens s + m] x[row (s + m) U + u + 1, same cols]
@@ -399,4 +399,59 @@ __kernel void epi_zu(__global float *kx, __global float *z, __global float *u, _
               + ((r2.s8 + r2.s9) + (r2.sa + r2.sb)) + ((r2.sc + r2.sd) + (r2.se + r2.sf));
     l1[k] = ((a.s0 + a.s1) + (a.s2 + a.s3)) + ((a.s4 + a.s5) + (a.s6 + a.s7))
           + ((a.s8 + a.s9) + (a.sa + a.sb)) + ((a.sc + a.sd) + (a.se + a.sf));
+}
+
+// The rays' maps from the lens maps (twin: lfcl/ops/epi.py ray_maps_np): sample (s, t, u, v) reads the disparity and
+// the confidence at the lens its ray sees in the centre view, round(s + d0 (u - uc)), round(t + d0 (v - vc)) (d0
+// its own lens's disparity), clamped to the frame, in float32 without contraction as the twin computes it.
+// rays [2, H, W]. Global size (W, H).
+__kernel void epi_ray_maps(__global const float *disparity, __global const float *confidence, __global float *rays,
+                           const int S, const int T)
+{
+    const int col = get_global_id(0), row = get_global_id(1);
+    const int W = T * PITCH_V, H = S * PITCH_U;
+    if (col >= W || row >= H)
+        return;
+    const int s = row / PITCH_U, u = row - s * PITCH_U, t = col / PITCH_V, v = col - t * PITCH_V;
+    const float d0 = disparity[s * T + t];
+    const float ku = (float)u - 0.5f * (float)(PITCH_U - 1), kv = (float)v - 0.5f * (float)(PITCH_V - 1);
+    const float ys = (float)s + d0 * ku, xs = (float)t + d0 * kv;
+    const int sc = clamp((int)floor(ys + 0.5f), 0, S - 1), tc = clamp((int)floor(xs + 0.5f), 0, T - 1);
+    rays[(size_t)row * W + col] = disparity[sc * T + tc];
+    rays[(size_t)H * W + (size_t)row * W + col] = confidence[sc * T + tc];
+}
+
+// Per lens, the offsets (relative to the lens) of the first and last lens that a tap of nonzero weight of any of its
+// rays lands on, before clamping to the frame (twin: lfcl/ops/epi.py lens_tap_spans_np): spans [4, S, T] int of
+// (u-block first, u-block last, v-block first, v-block last); the u-block takes the rows u < U - 1, the v-block the
+// columns v < V - 1 (first > last when there are none). p = own - d: floor(p) = own + floor(-d); the taps are
+// floor(p) - 1 .. floor(p) + 2, only floor(p) when p is whole. The host builds the kernels' offset table from them.
+// Global size (T, S).
+__kernel void epi_lens_tap_spans(__global const float *rays, __global int *spans, const int S, const int T)
+{
+    const int t = get_global_id(0), s = get_global_id(1);
+    if (t >= T || s >= S)
+        return;
+    const int W = T * PITCH_V;
+    int u_lo = 1 << 20, u_hi = -(1 << 20), v_lo = 1 << 20, v_hi = -(1 << 20);
+    for (int u = 0; u < PITCH_U; ++u)
+        for (int v = 0; v < PITCH_V; ++v) {
+            const float d = rays[(size_t)(s * PITCH_U + u) * W + t * PITCH_V + v];
+            const float whole = floor(-d);
+            const int exact = (-d - whole) == 0.0f;
+            const int lo = (int)whole - (exact ? 0 : 1), hi = (int)whole + (exact ? 0 : 2);
+            if (u < PITCH_U - 1) {
+                u_lo = min(u_lo, lo);
+                u_hi = max(u_hi, hi);
+            }
+            if (v < PITCH_V - 1) {
+                v_lo = min(v_lo, lo);
+                v_hi = max(v_hi, hi);
+            }
+        }
+    const size_t plane = (size_t)S * T, at = (size_t)s * T + t;
+    spans[at] = u_lo;
+    spans[plane + at] = u_hi;
+    spans[2 * plane + at] = v_lo;
+    spans[3 * plane + at] = v_hi;
 }
