@@ -100,6 +100,47 @@ def test_view_major_copy_and_unusable_lenses_match_numpy(runtime, rng):
     np.testing.assert_array_equal(op.unusable_lenses(data, np.inf), not_a_number)
 
 
+@pytest.mark.parametrize("lenses, radius", [((6, 9), 4), ((1, 3), 1), ((5, 4), 0)])
+def test_device_window_weights_match_numpy(runtime, rng, lenses, radius):
+    """The window weights built on the device from the guide against their twin, neighbours past the frame 0."""
+    from lfcl.depth.cost import WindowAggregate
+    from lfcl.depth.estimate import _guide_scale, _window_weights
+
+    guide = rng.uniform(0.0, 0.3, (3, *lenses))
+    guide[:, 0, 0] += 0.05  # one lens unlike its neighbours: weights well below 1
+    offsets, want = _window_weights(guide, radius, 30.0, 2e-4, 1e-6)
+    got = WindowAggregate(runtime, 1, lenses, radius).weights(guide, _guide_scale(guide, 30.0, 2e-4, 1e-6)).get()
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7)
+    if radius:  # neighbours outside the frame weigh 0, the unlike lens's little
+        assert want.min() == 0.0 and 0.0 < want[want > 0].min() < 0.5
+    else:  # the lens itself
+        np.testing.assert_array_equal(want, 1.0)
+
+
+def test_device_choice_between_apertures_matches_numpy(runtime, rng):
+    """Step 3's choice between the apertures' cost curves on the device (one aperture at a time, in place) against
+    its twin: the chosen curve, score and noise; lenses where a half aperture wins and where the full one stays, and
+    a lens with no weight (the 1e-12 guard)."""
+    from lfcl.depth.cost import WindowAggregate
+    from lfcl.depth.estimate import take_aperture_np
+
+    ND, S, T = 6, 5, 7
+    window = WindowAggregate(runtime, 2 * ND, (S, T), 1)
+    best_dev = (runtime.empty((ND, S, T)), runtime.empty((S, T)), runtime.empty((S, T)))
+    best, chosen = None, np.zeros((S, T), int)
+    for index in range(5):
+        sums = np.concatenate([rng.normal(0.0, 3.0, (ND, S, T)), rng.uniform(0.5, 40.0, (ND, S, T))]).astype(np.float32)
+        sums[ND:, 0, 0] = 0.0
+        before = None if best is None else best[1]
+        best = take_aperture_np(best, sums[:ND].astype(np.float64), sums[ND:].astype(np.float64), half=index > 0)
+        if before is not None:
+            chosen[best[1] != before] = index
+        window.take_aperture(runtime.to_device(sums), best_dev, half=index > 0, first=index == 0)
+        for got, want in zip(best_dev, best):
+            np.testing.assert_allclose(got.get(), want, rtol=1e-5)
+    assert (chosen == 0).any() and (chosen > 0).any()  # some lenses kept the full aperture, some took a half
+
+
 def test_cost_geometry_holds_the_sums_of_an_interior_lens(rng):
     """The table's 12 sums per colour are the twin's (rows 0-5 and 10-15 of its ``acc``), for a lens of each parity."""
     from lfcl.depth.cost import cost_geometry, tap_reach

@@ -355,6 +355,38 @@ class WindowAggregate:
         self.maps_shape = (self.planes, self.S, self.T)
         self.weights_shape = ((2 * self.radius + 1) ** 2, self.S, self.T)
 
+    def weights(self, guide, scale):
+        """The window weights ``[(2R + 1)^2, S, T]`` on the device from the host guide and its scale ``[3, S, T]``
+        (kernel ``depth_window_weights``; twin :func:`lfcl.depth.estimate._window_weights`, 0.55 s on the host at
+        500x500 lenses, then 81 MB to upload)."""
+        from ..device import grid_defines
+
+        out = self.runtime.empty(((2 * self.radius + 1) ** 2, self.S, self.T))
+        guide, scale = (self.runtime.to_device(np.ascontiguousarray(a, dtype=np.float32)) for a in (guide, scale))
+        self.runtime.launch("depth_aggregate", "depth_window_weights", (self.T, self.S, out.shape[0]), guide.data,
+                            scale.data, out.data, np.int32(self.S), np.int32(self.T), np.int32(self.radius),
+                            defines=(*grid_defines((1, 1), 0), ("CHUNK", AGGREGATE_CHUNK)))
+        return out
+
+    def take_aperture(self, sums, best, half: bool, first: bool):
+        """Step 3's choice between apertures on the device (kernel ``depth_take_aperture``; twin
+        :func:`lfcl.depth.estimate.take_aperture_np`): ``sums`` an aperture's window sums ``[2 ND, S, T]`` (excess,
+        weight; ``planes`` = 2 ND), ``best`` the device arrays (curve ``[ND, S, T]``, score ``[S, T]``, noise
+        ``[S, T]``) updated in place where this aperture's score is lower (``first``: everywhere)."""
+        from ..device import grid_defines
+        from ..ops import check_device_array
+
+        ND = self.planes // 2
+        check_device_array(sums, (2 * ND, self.S, self.T), "sums")
+        curve, score, noise = best
+        check_device_array(curve, (ND, self.S, self.T), "curve")
+        for name, array in (("score", score), ("noise", noise)):
+            check_device_array(array, (self.S, self.T), name)
+        self.runtime.launch("depth_aggregate", "depth_take_aperture", (self.T, self.S), sums.data, curve.data,
+                            score.data, noise.data, np.int32(self.S), np.int32(self.T), np.int32(ND),
+                            np.int32(bool(half)), np.int32(bool(first)),
+                            defines=(*grid_defines((1, 1), 0), ("CHUNK", AGGREGATE_CHUNK)))
+
     def forward(self, maps, weights, out=None, first: int = 0):
         """``[P, S, T]`` float32 device maps, ``[(2R + 1)^2, S, T]`` device weights -> ``[P, S, T]`` window sums;
         ``first``: the P maps start at that plane of a larger ``[N, S, T]`` stack (one aperture of a

@@ -23,8 +23,9 @@
    smoothness term, so that lenses of low confidence take their neighbours' value; the returned
    ``confidence`` stays the step-3 one (0 = unknown).
 
-Steps 1 and 2 run on the device (lfcl/kernels/depth.cl, depth_aggregate.cl; only the window sums come
-back), the rest on the host; ``backend="numpy"`` runs the float64 twins of both.
+Steps 1 and 2 (the window weights too) and step 3's choice between apertures run on the device
+(lfcl/kernels/depth.cl, depth_aggregate.cl; only the chosen cost curve comes back), the rest on the host;
+``backend="numpy"`` runs their float64 twins.
 
 Units and sign: ``d`` in lenses per view step; a point seen at lens ``(s, t)`` in the centre view
 ``(uc, vc)`` is seen by view ``(u, v)`` at lens ``(s - d (u - uc), t - d (v - vc))`` (HCI's sign).
@@ -37,7 +38,7 @@ import time
 
 import numpy as np
 
-from ..layout import channel_map, parse_pattern
+from ..layout import parse_pattern, pattern_channels
 from . import _checks
 from .cost import (
     MODELS,
@@ -189,7 +190,11 @@ def _guide(mosaic, pattern, pitch, origin, S, T) -> np.ndarray:
     r0, r1 = max(0, U // 2 - 1), min(U, U // 2 + 2)
     c0, c1 = max(0, V // 2 - 1), min(V, V // 2 + 2)
     m4 = mosaic.reshape(S, U, T, V)[:, r0:r1, :, c0:c1]
-    ch = channel_map(mosaic.shape, pattern, origin).reshape(S, U, T, V)[:, r0:r1, :, c0:c1]
+    # The colours of just those pixels (a whole-sensor channel map took most of this function's time).
+    cells = pattern_channels(pattern, origin)
+    rows = (np.arange(S)[:, None] * U + np.arange(r0, r1)[None, :]) % 2  # [S, rows]
+    cols = (np.arange(T)[:, None] * V + np.arange(c0, c1)[None, :]) % 2  # [T, cols]
+    ch = cells[rows[:, :, None, None], cols[None, None, :, :]]
     out = np.empty((3, S, T), np.float64)
     overall = m4.mean(axis=(1, 3))
     for c in range(3):
@@ -200,20 +205,49 @@ def _guide(mosaic, pattern, pitch, origin, S, T) -> np.ndarray:
     return out
 
 
-def _window_weights(guide, radius, sigma, gain, floor):
-    """Per offset (dy, dx) in the window: [n, S, T] weights exp(-(guide difference / noise)^2 / sigma^2)."""
-    _, S, T = guide.shape
-    nv = gain * np.maximum(guide, 0) + floor  # per colour, per lens
+def _guide_scale(guide, sigma, gain, floor):
+    """Per colour and lens, 1 / (3 nv sigma^2): a neighbour's ``z^2 / sigma^2`` is the sum over colours of its
+    squared guide difference times it (nv the lens's noise variance per colour)."""
+    nv = gain * np.maximum(guide, 0) + floor
     # The guide averages ~2-5 samples per colour: its noise variance is about nv / 2.
-    offsets, weights = window_offsets(radius), []
+    return 1.0 / (3.0 * sigma * sigma * np.maximum(nv, 1e-12))
+
+
+def _window_weights(guide, radius, sigma, gain, floor):
+    """Per offset (dy, dx) in the window: [n, S, T] weights exp(-(guide difference / noise)^2 / sigma^2), the mean
+    over colours of the squared differences in noise units; 0 for a neighbour outside the frame. The twin of
+    lfcl/kernels/depth_aggregate.cl ``depth_window_weights``."""
+    _, S, T = guide.shape
+    scale = _guide_scale(guide, sigma, gain, floor)
+    offsets = window_offsets(radius)
+    weights = np.empty((len(offsets), S, T))
     pad = np.pad(guide, ((0, 0), (radius, radius), (radius, radius)), mode="edge")
     valid = np.pad(np.ones((S, T)), radius)
-    for dy, dx in offsets:
-        other = pad[:, radius + dy:radius + dy + S, radius + dx:radius + dx + T]
-        inside = valid[radius + dy:radius + dy + S, radius + dx:radius + dx + T]
-        z2 = ((other - guide) ** 2 / np.maximum(nv, 1e-12)).mean(axis=0)
-        weights.append(inside * np.exp(-z2 / (sigma * sigma)))
-    return offsets, np.stack(weights)
+    diff = np.empty_like(guide)
+    for n, (dy, dx) in enumerate(offsets):  # the buffers reused: one pass per operation
+        np.subtract(pad[:, radius + dy:radius + dy + S, radius + dx:radius + dx + T], guide, out=diff)
+        np.multiply(diff, diff, out=diff)
+        np.multiply(diff, scale, out=diff)
+        np.sum(diff, axis=0, out=weights[n])
+        np.exp(np.negative(weights[n], out=weights[n]), out=weights[n])
+        weights[n] *= valid[radius + dy:radius + dy + S, radius + dx:radius + dx + T]
+    return offsets, weights
+
+
+def take_aperture_np(best, agg_excess, agg_weight, half: bool):
+    """Step 3's choice between apertures, one at a time: an aperture's cost curve ``excess / weight`` (its window
+    sums ``[ND, S, T]``), the cost's noise ``sqrt(2 / largest weight)`` (excess / weight of pure noise has a
+    standard deviation ~ sqrt(2 / weight)) and its score, the curve's minimum, plus twice the noise for a half
+    aperture (it must beat the full one by more than its own noise). Returns ``(curve, score, noise)``, taking this
+    aperture's where its score is lower than ``best``'s (None: the first aperture). The twin of
+    lfcl/kernels/depth_aggregate.cl ``depth_take_aperture``."""
+    curve = agg_excess / np.maximum(agg_weight, 1e-12)
+    noise = np.sqrt(2.0 / np.maximum(agg_weight.max(axis=0), 1e-12))
+    score = curve.min(axis=0) + (2.0 * noise if half else 0.0)
+    if best is None:
+        return curve, score, noise
+    take = score < best[1]
+    return np.where(take[None], curve, best[0]), np.where(take, score, best[1]), np.where(take, noise, best[2])
 
 
 def _best(cost, ds, exclusion):
@@ -351,55 +385,39 @@ def estimate_disparity(mosaic, pattern, pitch, *, origin=(0, 0), noise=None, dev
     subsets = [None] + (half_apertures(U, V) if opts["occlusion"] else [])
     cost_seconds = 0.0
     guide = _guide(mosaic, pattern, (U, V), origin, S, T)
-    offsets, wwin = _window_weights(guide, opts["radius"], opts["guide_sigma"], gain, floor)
     if opts["backend"] == "numpy":
-        def aggregated(index, want_seen):
-            """The window sums of aperture ``index``'s excess and weight, and (``want_seen``) the lenses that
-            gathered any sample."""
+        offsets, wwin = _window_weights(guide, opts["radius"], opts["guide_sigma"], gain, floor)
+        best = None
+        for index, views in enumerate(subsets):  # one aperture at a time
+            start = time.perf_counter()
             volume = cost_volume_np(mosaic, pattern, (U, V), ds, origin=origin, noise=(gain, floor),
-                                    saturation=opts["saturation"], model=opts["model"], views=subsets[index])
-            return (aggregate_window_np(volume[0], offsets, wwin), aggregate_window_np(volume[1], offsets, wwin),
-                    volume[1].max(axis=0) > 0 if want_seen else None)
-    else:  # the volumes stay on the device (one gather for every aperture); only their window sums come back
+                                    saturation=opts["saturation"], model=opts["model"], views=views)
+            if index == 0:
+                seen = volume[1].max(axis=0) > 0  # lenses that gathered any sample (the full aperture)
+            best = take_aperture_np(best, aggregate_window_np(volume[0], offsets, wwin),
+                                    aggregate_window_np(volume[1], offsets, wwin), half=index > 0)
+            cost_seconds += time.perf_counter() - start
+        cost, _, sigma_c = best
+    else:  # the volumes, their window sums and the choice between apertures stay on the device
         from ..device import get_runtime
 
+        start = time.perf_counter()
         runtime = get_runtime(device)
         op = CostVolume(runtime, mosaic.shape, pattern, (U, V), ds, origin=origin, model=opts["model"],
                         halves=opts["occlusion"])
         window = WindowAggregate(runtime, 2 * ds.size, (S, T), opts["radius"])
-        data, weights = runtime.to_device(mosaic), runtime.to_device(wwin.astype(np.float32))
-        start = time.perf_counter()
+        data = runtime.to_device(mosaic)
+        weights = window.weights(guide, _guide_scale(guide, opts["guide_sigma"], gain, floor))
         volumes = op.forward(data, (gain, floor), opts["saturation"]).reshape(len(subsets) * 2 * ds.size, S, T)
+        best = (runtime.empty((ds.size, S, T)), runtime.empty((S, T)), runtime.empty((S, T)))
+        sums = runtime.empty((2 * ds.size, S, T))
+        for index in range(len(subsets)):
+            window.forward(volumes, weights, out=sums, first=index * 2 * ds.size)
+            window.take_aperture(sums, best, half=index > 0, first=index == 0)
+        seen = volumes[ds.size:2 * ds.size].get().max(axis=0) > 0  # lenses that gathered any sample (full aperture)
+        cost, sigma_c = best[0].get().astype(np.float64), best[2].get().astype(np.float64)
         cost_seconds += time.perf_counter() - start
-
-        def aggregated(index, want_seen):
-            first = index * 2 * ds.size
-            sums = window.forward(volumes, weights, first=first).get().astype(np.float64)
-            gathered = volumes[first + ds.size:first + 2 * ds.size].get().max(axis=0) > 0 if want_seen else None
-            return sums[:ds.size], sums[ds.size:], gathered
-
-    best, seen = None, None
-    for index in range(len(subsets)):  # one aperture's window sums at a time on the host
-        start = time.perf_counter()
-        agg_excess, agg_weight, gathered = aggregated(index, want_seen=seen is None)
-        cost_seconds += time.perf_counter() - start
-        if seen is None:
-            seen = gathered  # lenses that gathered any sample (the full aperture's volume)
-        cost = agg_excess / np.maximum(agg_weight, 1e-12)
-        # The cost's noise: excess / weight of pure noise has a standard deviation ~ sqrt(2 / weight).
-        sigma_c = np.sqrt(2.0 / np.maximum(agg_weight.max(axis=0), 1e-12))
-        del agg_excess, agg_weight
-        # A half aperture must beat the full one by more than its own noise (2 sigma).
-        score = cost.min(axis=0) + (2.0 * sigma_c if index else 0.0)
-        if best is None:
-            best = [score, cost, sigma_c]
-        else:
-            take = score < best[0]
-            best[0] = np.where(take, score, best[0])
-            best[1] = np.where(take[None], cost, best[1])
-            best[2] = np.where(take, sigma_c, best[2])
     seconds["cost_and_window"] = cost_seconds
-    _, cost, sigma_c = best
     raw_d, c_best, c_other = _best(cost, ds.astype(np.float64), opts["exclusion"])
     z = (c_other - c_best) / (sigma_c + 0.5 * np.maximum(c_best, 0.0))
     confidence = 1.0 - np.exp(-(np.maximum(z, 0.0) / opts["confidence_z"]) ** 2)

@@ -64,3 +64,56 @@ __kernel void depth_aggregate(__global const float *maps, __global const float *
         }
     }
 }
+
+// Step 3's choice between apertures, one aperture at a time (twin: lfcl/depth/estimate.py take_aperture_np): from
+// an aperture's window sums (`sums`: [2 ND, S, T], excess then weight), per lens its cost curve excess / weight, the
+// cost's noise sigma = sqrt(2 / (largest weight)) and its score, the curve's minimum (plus 2 sigma for a half
+// aperture, which must beat the full one by twice its own noise); where the score is lower than the best so far
+// (or `first`), the lens takes this aperture's curve, score and noise. Global size (T, S).
+__kernel void depth_take_aperture(__global const float *sums, __global float *curve, __global float *score,
+                                  __global float *noise, const int S, const int T, const int ND, const int half_aperture,
+                                  const int first)
+{
+    const int t = get_global_id(0), s = get_global_id(1);
+    if (t >= T || s >= S)
+        return;
+    const size_t lenses = (size_t)S * T, at = (size_t)s * T + t;
+    float largest = 0.0f, lowest = INFINITY;
+    for (int k = 0; k < ND; ++k) {
+        const float weight = sums[(size_t)(ND + k) * lenses + at];
+        largest = fmax(largest, weight);
+        lowest = fmin(lowest, sums[(size_t)k * lenses + at] / fmax(weight, 1e-12f));
+    }
+    const float sigma = sqrt(2.0f / fmax(largest, 1e-12f));
+    const float mine = lowest + (half_aperture ? 2.0f * sigma : 0.0f);
+    if (first || mine < score[at]) {
+        score[at] = mine;
+        noise[at] = sigma;
+        for (int k = 0; k < ND; ++k)
+            curve[(size_t)k * lenses + at] = sums[(size_t)k * lenses + at] / fmax(sums[(size_t)(ND + k) * lenses + at], 1e-12f);
+    }
+}
+
+// The window weights (twin: lfcl/depth/estimate.py _window_weights): for window offset o = (dy, dx) of lens (s, t),
+// exp(-sum over colours of (guide[c][s + dy][t + dx] - guide[c][s][t])^2 scale[c][s][t]), 0 for a neighbour outside
+// the frame; `scale` = 1 / (3 nv sigma^2) per colour and lens. weights [(2R + 1)^2, S, T]. Global size (T, S, (2R + 1)^2).
+__kernel void depth_window_weights(__global const float *guide, __global const float *scale, __global float *weights,
+                                   const int S, const int T, const int radius)
+{
+    const int t = get_global_id(0), s = get_global_id(1), o = get_global_id(2);
+    const int side = 2 * radius + 1;
+    if (t >= T || s >= S || o >= side * side)
+        return;
+    const int ss = s + o / side - radius, tt = t + o % side - radius;
+    const size_t lenses = (size_t)S * T, at = (size_t)s * T + t;
+    float weight = 0.0f;
+    if (ss >= 0 && ss < S && tt >= 0 && tt < T) {
+        float z = 0.0f;
+        for (int c = 0; c < 3; ++c) {
+            const float diff = guide[c * lenses + (size_t)ss * T + tt] - guide[c * lenses + at];
+            z += diff * diff * scale[c * lenses + at];
+        }
+        weight = exp(-z);
+    }
+    weights[(size_t)o * lenses + at] = weight;
+}
