@@ -108,7 +108,7 @@ def test_device_window_weights_match_numpy(runtime, rng, lenses, radius):
 
     guide = rng.uniform(0.0, 0.3, (3, *lenses))
     guide[:, 0, 0] += 0.05  # one lens unlike its neighbours: weights well below 1
-    offsets, want = _window_weights(guide, radius, 30.0, 2e-4, 1e-6)
+    _, want = _window_weights(guide, radius, 30.0, 2e-4, 1e-6)
     got = WindowAggregate(runtime, 1, lenses, radius).weights(guide, _guide_scale(guide, 30.0, 2e-4, 1e-6)).get()
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7)
     if radius:  # neighbours outside the frame weigh 0, the unlike lens's little

@@ -652,10 +652,20 @@ def test_cross_block_and_colour_differences_pass_the_dot_test(runtime, rng):
 
 
 def test_cross_block_gram_diagonal_is_colour_gram_times_the_epi_diagonal(runtime, rng):
-    """diag((D C)^T (D C)) = (1, 2, 1) x diag(D^T D), probed column by column, and the device's Jacobi step
-    divides by diag(A^T W A + rho K^T K + delta) with it (delta the proximal term)."""
+    """diag((D C)^T (D C)) = (1, 2, 1) x diag(D^T D), probed column by column (the cross block's whole per-pixel
+    colour block is diag(D^T D) C^T C), and the device's preconditioner solves each pixel's 3x3 colour block of
+    A^T W A + rho K^T K + delta with it (delta the proximal term), by the definition and as its twin."""
     from lfcl.ops.cfa import cfa_adjoint_np
-    from lfcl.solvers.epi import EPI_PROXIMAL, EpiAdmmSolver, EpiPrior, epi_cross_adjoint_np, epi_cross_gradient_np
+    from lfcl.ops.crosschannel import COLOUR_GRAM
+    from lfcl.solvers.epi import (
+        EPI_PROXIMAL,
+        EpiAdmmSolver,
+        EpiPrior,
+        epi_block_jacobi_np,
+        epi_colour_blocks_np,
+        epi_cross_adjoint_np,
+        epi_cross_gradient_np,
+    )
     from lfcl.solvers.params import AdmmParams
 
     S, T, U, V = 3, 2, 3, 3
@@ -671,12 +681,24 @@ def test_cross_block_gram_diagonal_is_colour_gram_times_the_epi_diagonal(runtime
     weights[0, 0] = 0.0
     rho = 0.7
     fallback = epi_diagonal_np(np.zeros_like(disparity), (U, V), 1 - confidence)
-    expected = cfa_adjoint_np(np.tile(weights, (S, T)), "GRBG") + rho * (epi + fallback + probed) + EPI_PROXIMAL * rho
+    data = cfa_adjoint_np(np.tile(weights, (S, T)), "GRBG")
+    # The blocks by their definition, pixel by pixel.
+    blocks = np.empty((H, W, 3, 3))
+    for i in range(H):
+        for j in range(W):
+            blocks[i, j] = (np.diag(data[:, i, j]) + (rho * (epi[i, j] + fallback[i, j]) + EPI_PROXIMAL * rho) * np.eye(3)
+                            + rho * epi[i, j] * COLOUR_GRAM)
+    np.testing.assert_allclose(np.diagonal(blocks, axis1=-2, axis2=-1).transpose(2, 0, 1),
+                               data + rho * (epi + fallback + probed) + EPI_PROXIMAL * rho, atol=1e-12)
+    np.testing.assert_allclose(epi_colour_blocks_np(data, epi + fallback, epi, rho, EPI_PROXIMAL * rho), blocks, rtol=1e-14)
     solver = EpiAdmmSolver(runtime, (H, W), "GRBG", (U, V))
     solver.prepare(AdmmParams(lam=0.01, lam_xc=0.02, rho=rho), EpiPrior(disparity, confidence, lam_fb=0.01), weights)
     assert [lam for _, lam in solver.blocks] == [0.01, 0.02, 0.01] and solver.blocks[1][0] is solver.cross
-    got = solver.precondition(runtime.to_device(np.ones((3, H, W), np.float32)), runtime.empty((3, H, W)), rho).get()
-    np.testing.assert_allclose(got, 1 / expected, rtol=1e-5)
+    r = rng.standard_normal((3, H, W)).astype(np.float32)
+    got = solver.precondition(runtime.to_device(r), runtime.empty((3, H, W)), rho).get()
+    want = np.linalg.solve(blocks, np.moveaxis(r, 0, -1)[..., None].astype(np.float64))[..., 0]
+    np.testing.assert_allclose(got, np.moveaxis(want, -1, 0), rtol=1e-4, atol=1e-5 * np.abs(want).max())
+    np.testing.assert_allclose(epi_block_jacobi_np(blocks, r), np.moveaxis(want, -1, 0), rtol=1e-12)
 
 
 @pytest.mark.parametrize("pattern, lam_fb", [("GRBG", 0.02), ("BGGR", 0.0)])
@@ -749,7 +771,8 @@ def test_epi_params_sets_lam_xc_from_the_schedule(monkeypatch):
 
 
 def test_fused_cg_step_matches_its_numpy_twin(runtime, rng):
-    """CgSteps: q = N p with <p, q>, then x += alpha p, r -= alpha q, pz = r / diag(N) with <r, pz> and |r|^2,
+    """CgSteps: q = N p with <p, q>, then x += alpha p, r -= alpha q, pz = (N's per-pixel colour blocks)^-1 r with
+    <r, pz> and |r|^2,
     against float64 twins (N = A^T A + rho K^T K + delta with the EPI, cross-channel and fall-back blocks and the
     proximal term), on a frame whose width is not a whole number of 16-column runs."""
     from lfcl.ops.cfa import cfa_adjoint_np, cfa_sample_np
@@ -758,6 +781,8 @@ def test_fused_cg_step_matches_its_numpy_twin(runtime, rng):
         CgSteps,
         EpiAdmmSolver,
         EpiPrior,
+        epi_block_jacobi_np,
+        epi_colour_blocks_np,
         epi_cross_adjoint_np,
         epi_cross_gradient_np,
     )
@@ -781,8 +806,8 @@ def test_fused_cg_step_matches_its_numpy_twin(runtime, rng):
         + epi_cross_adjoint_np(epi_cross_gradient_np(p64, disparity, (U, V), confidence), disparity, (U, V),
                                confidence)) + EPI_PROXIMAL * rho * p64
     epi = epi_diagonal_np(disparity, (U, V), confidence)
-    diagonal = cfa_adjoint_np(np.ones((H, W)), "GRBG") + rho * (
-        epi + epi_diagonal_np(zeros, (U, V), fall) + np.stack([epi, 2 * epi, epi])) + EPI_PROXIMAL * rho
+    blocks = epi_colour_blocks_np(cfa_adjoint_np(np.ones((H, W)), "GRBG"), epi + epi_diagonal_np(zeros, (U, V), fall),
+                                  epi, rho, EPI_PROXIMAL * rho)
     steps = CgSteps(solver, rho)
     xd, pd, rd, qd, zd = (runtime.to_device(a) for a in (x, p, r, np.zeros_like(x), np.zeros_like(x)))
     pq = steps.apply_dot(pd, qd)
@@ -790,7 +815,7 @@ def test_fused_cg_step_matches_its_numpy_twin(runtime, rng):
     assert pq == pytest.approx(float(np.sum(p64 * expected_q)), rel=1e-5)
     rz, r2 = steps.update(alpha, xd, pd, rd, qd, zd)
     r_next = r - alpha * qd.get().astype(np.float64)  # from the device's q: the step's own arithmetic
-    z_next = r_next / diagonal
+    z_next = epi_block_jacobi_np(blocks, r_next)
     np.testing.assert_allclose(xd.get(), x + alpha * p64, rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(rd.get(), r_next, rtol=1e-5, atol=1e-5)
     np.testing.assert_allclose(zd.get(), z_next, rtol=1e-5, atol=1e-5)

@@ -306,18 +306,31 @@ __kernel void epi_rhs_finish(__global float *out, __global const float *b, __glo
     }
 }
 
-// 1 / diag(A^T W A + rho K^T K + delta) of colour c, 0 where the diagonal is 0. kdiag = diag(K^T K) [H, W] of the blocks
-// that treat the colours alike; with `cross`, the cross-channel block (D C)^T (D C) = C^T C (x) D^T D adds its
-// diagonal: that of C^T C, (1, 2, 1) for (R, G, B), times xdiag = diag(D^T D) [H, W].
-inline float16 jacobi_scale(float16 own, float16 other, __global const float *weight_runs, int row, int16 cols,
-                            int pattern, int c, float rho, float delta)
+// The preconditioner (block Jacobi): per pixel, the inverse of the 3x3 colour block of N = A^T W A + rho K^T K + delta,
+//   [[m_R + a + b, -b, 0], [-b, m_G + a + 2 b, -b], [0, -b, m_B + a + b]],
+// a = rho own + delta, own = diag(K^T K) [H, W] of the blocks that treat the colours alike, b = rho other, other =
+// xdiag = diag(D^T D) of the cross-channel block, whose per-pixel block is C^T C times it ((D C)^T (D C) =
+// C^T C (x) D^T D; 0 without it), m_c the data weight where the pixel measured colour c. The colour differences
+// couple a pixel's colours as strongly as the lines couple its neighbours; the diagonal alone left CG's residual
+// 1.7-2x higher after 5 steps (docs/admm.md, "The preconditioner"). Without the cross block (b = 0) it is the
+// diagonal (Jacobi). A block that is not positive definite (no prior, no data and no delta) gives 0.
+inline void block_jacobi(float16 own, float16 other, __global const float *weight_runs, int row, int16 cols,
+                         int pattern, float rho, float delta, float16 *z0, float16 *z1, float16 *z2)
 {
-    const float16 diagonal = data_weight(weight_runs, row, cols, pattern, c)
-                           + rho * (own + (c == 1 ? 2.0f : 1.0f) * other) + delta;
-    return select((float16)0.0f, 1.0f / diagonal, diagonal > 0.0f);
+    const float16 a = rho * own + delta, b = rho * other;
+    const float16 d0 = data_weight(weight_runs, row, cols, pattern, 0) + a + b;
+    const float16 d1 = data_weight(weight_runs, row, cols, pattern, 1) + a + 2.0f * b;
+    const float16 d2 = data_weight(weight_runs, row, cols, pattern, 2) + a + b;
+    const float16 bb = b * b;
+    const float16 det = d0 * d1 * d2 - bb * (d0 + d2);
+    const float16 inv = select((float16)0.0f, 1.0f / det, det > 0.0f && d0 > 0.0f && d2 > 0.0f);
+    const float16 r0 = *z0, r1 = *z1, r2 = *z2;
+    *z0 = inv * ((d1 * d2 - bb) * r0 + b * d2 * r1 + bb * r2);
+    *z1 = inv * (b * d2 * r0 + d0 * d2 * r1 + b * d0 * r2);
+    *z2 = inv * (bb * r0 + b * d0 * r1 + (d0 * d1 - bb) * r2);
 }
 
-// out = r / diag(A^T W A + rho K^T K + delta) (jacobi_scale).
+// out = the preconditioner applied to r (block_jacobi).
 __kernel void epi_jacobi(__global const float *r, __global float *out, __global const float *kdiag,
                          __global const float *xdiag, const int cross, __global const float *weight_runs,
                          const float rho, const float delta, const int height, const int width, const int pattern)
@@ -325,11 +338,12 @@ __kernel void epi_jacobi(__global const float *r, __global float *out, __global 
     RUN_PROLOGUE
     const float16 own = load_row(kdiag + base, col0, 0, width);
     const float16 other = cross ? load_row(xdiag + base, col0, 0, width) : (float16)0.0f;
-    for (int c = 0; c < 3; ++c) {
-        const size_t at = c * plane + base;
-        const float16 scale = jacobi_scale(own, other, weight_runs, row, cols, pattern, c, rho, delta);
-        store_row(load_row(r + at, col0, 0, width) * scale, out + at, col0, width);
-    }
+    float16 z0 = load_row(r + base, col0, 0, width), z1 = load_row(r + plane + base, col0, 0, width);
+    float16 z2 = load_row(r + 2 * plane + base, col0, 0, width);
+    block_jacobi(own, other, weight_runs, row, cols, pattern, rho, delta, &z0, &z1, &z2);
+    store_row(z0, out + base, col0, width);
+    store_row(z1, out + plane + base, col0, width);
+    store_row(z2, out + 2 * plane + base, col0, width);
 }
 
 // One CG step's vector work in one pass: x += alpha p, r -= alpha q, pz = r / diag (epi_jacobi), and per work-item
@@ -343,17 +357,21 @@ __kernel void epi_cg_update(__global float *x, __global const float *p, __global
     RUN_PROLOGUE
     const float16 own = load_row(kdiag + base, col0, 0, width);
     const float16 other = cross ? load_row(xdiag + base, col0, 0, width) : (float16)0.0f;
-    float16 rz = (float16)0.0f, r2 = (float16)0.0f;
+    float16 rc[3], zc[3];
     for (int c = 0; c < 3; ++c) {
         const size_t at = c * plane + base;
         const float16 pc = load_row(p + at, col0, 0, width);
         store_row(load_row(x + at, col0, 0, width) + alpha * pc, x + at, col0, width);
-        const float16 rc = load_row(r + at, col0, 0, width) - alpha * load_row(q + at, col0, 0, width);
-        const float16 zc = rc * jacobi_scale(own, other, weight_runs, row, cols, pattern, c, rho, delta);
-        store_row(rc, r + at, col0, width);
-        store_row(zc, pz + at, col0, width);
-        rz += rc * zc;  // lanes past the row: 0 (load_row)
-        r2 += rc * rc;
+        rc[c] = load_row(r + at, col0, 0, width) - alpha * load_row(q + at, col0, 0, width);
+        store_row(rc[c], r + at, col0, width);
+        zc[c] = rc[c];
+    }
+    block_jacobi(own, other, weight_runs, row, cols, pattern, rho, delta, &zc[0], &zc[1], &zc[2]);
+    float16 rz = (float16)0.0f, r2 = (float16)0.0f;
+    for (int c = 0; c < 3; ++c) {
+        store_row(zc[c], pz + c * plane + base, col0, width);
+        rz += rc[c] * zc[c];  // lanes past the row: 0 (load_row)
+        r2 += rc[c] * rc[c];
     }
     const size_t w = (size_t)row * get_global_size(0) + get_global_id(0);
     rz_partial[w] = lane_sum(rz);

@@ -12,13 +12,14 @@ cross-channel term (``params.lam_xc > 0``) takes the same EPI differences of the
 
 Scaled-form ADMM over the stacked blocks ``K = [K_epi; K_fb; K_xc]``, each with its own threshold:
 
-    x <- (A^T W A + rho K^T K)^{-1} (A^T W b + rho K^T (z - u))   Jacobi-PCG, warm-started
+    x <- (A^T W A + rho K^T K)^{-1} (A^T W b + rho K^T (z - u))   block-Jacobi PCG, warm-started
     z <- S_{lam_b / rho}(K_b x + u_b)                              per block
     u <- u + K x - z
 
-``A^T W A + rho K^T K`` couples neighbouring lenses, so the x-update is the shared
-Jacobi-preconditioned CG (lfcl/solvers/cg.py) with ``diag(K^T K)`` from the operator's gather
-(EpiGradient.diagonal). Everything runs on the device; the host sees only the reductions (CG's
+``A^T W A + rho K^T K`` couples neighbouring lenses, so the x-update is the shared preconditioned CG
+(lfcl/solvers/cg.py), preconditioned by each pixel's 3x3 colour block of the normal operator (the colour
+differences of the cross block couple a pixel's colours; ``diag(K^T K)`` from the operator's gather,
+EpiGradient.diagonal; lfcl/kernels/epi.cl ``block_jacobi``, twin :func:`epi_block_jacobi_np`). Everything runs on the device; the host sees only the reductions (CG's
 scalars and one wait per iteration for the history). The history records and the stop rule are those
 of lfcl/solvers/admm.py (AdmmParams, IterationRecord, stop_reason): lam is ``params.lam``, lam_fb comes
 with the disparity in :class:`EpiPrior`.
@@ -358,7 +359,7 @@ class EpiAdmmSolver:
                 self.cross = EpiCrossGradient(self.runtime, self.epi)
                 self._xdiag = self.runtime.empty((self.height, self.width))
                 self._cross_scratch = self.runtime.empty(self.cross.gradient_shape)
-            self.vectors.copy(self._kdiag, self._xdiag)  # diag(D_epi^T D_epi); times (1, 2, 1) in epi_jacobi
+            self.vectors.copy(self._kdiag, self._xdiag)  # diag(D_epi^T D_epi); times C^T C in block_jacobi
             self.blocks.append((self.cross, params.lam_xc))
         if prior.has_fallback(self.lenses):
             self.fallback.set_maps(np.zeros_like(disparity), 1 - confidence)
@@ -419,7 +420,8 @@ class EpiAdmmSolver:
                 np.int32(self.width), self._pattern)
 
     def precondition(self, r, out, rho):
-        """out = r / diag(A^T W A + rho K^T K)."""
+        """out = the inverse of each pixel's colour block of ``A^T W A + rho K^T K + delta`` applied to r (block
+        Jacobi, lfcl/kernels/epi.cl ``block_jacobi``)."""
         self._pixelwise("epi_jacobi", r.data, out.data, *self._jacobi_args(rho))
         return out
 
@@ -581,8 +583,10 @@ def admm_epi_reference(b, pattern, pitch, params: AdmmParams, x0, prior: EpiPrio
         return (KT @ z.T).T.reshape(3, H, W)
 
     prior, prior_adjoint = main_prior, main_adjoint
-    diagonal = cfa_adjoint_np(w, pattern, origin) + params.rho * kdiag[None]
-    if params.cross_channel:  # K_xc = D_epi(d, w) C on the colour differences: K x flat, [K_main x; K_xc x]
+    data = cfa_adjoint_np(w, pattern, origin)  # [3, H, W]: the data weight on each pixel's measured colour
+    cross = np.zeros((H, W))
+    if params.cross_channel:
+        cross = epi_diagonal_np(disparity, pitch, matrix=M)  # K_xc = D_epi(d, w) C on the colour differences: K x flat, [K_main x; K_xc x]
         split = 3 * K.shape[0]
 
         def stacked_prior(v):
@@ -594,19 +598,37 @@ def admm_epi_reference(b, pattern, pitch, params: AdmmParams, x0, prior: EpiPrio
 
         prior, prior_adjoint = stacked_prior, stacked_adjoint
         prior_weights = np.concatenate([np.tile(prior_weights[0], 3), np.full(4 * H * W, params.lam_xc)])
-        # diag((D C)^T (D C)) = diag(C^T C) (1, 2, 1) per colour times diag(D^T D): the device's epi_jacobi
-        diagonal = diagonal + params.rho * np.diag(COLOUR_GRAM)[:, None, None] * epi_diagonal_np(
-            disparity, pitch, matrix=M)[None]
+    blocks = epi_colour_blocks_np(data, kdiag, cross, params.rho, EPI_PROXIMAL * params.rho)
     return admm_operators(
         b, x0, dataclasses.replace(params, lam=1.0), w,
         forward=lambda v: cfa_sample_np(v, pattern, origin),
         adjoint=lambda r: cfa_adjoint_np(r, pattern, origin),
         prior=prior,
         prior_adjoint=prior_adjoint,
-        diagonal=diagonal,
+        diagonal=np.diagonal(blocks, axis1=-2, axis2=-1).transpose(2, 0, 1),
         prior_weights=prior_weights,
         proximal=EPI_PROXIMAL * params.rho,
+        precondition=lambda r: epi_block_jacobi_np(blocks, r),
     )
+
+
+def epi_colour_blocks_np(data, kdiag, cross, rho, delta) -> np.ndarray:
+    """admm-epi's preconditioner blocks: per pixel the 3x3 colour block of ``A^T W A + rho K^T K + delta``,
+    ``diag(data) + (rho kdiag + delta) I + rho cross C^T C`` as [H, W, 3, 3] float64: ``data`` [3, H, W] the data
+    weight on each pixel's measured colour, ``kdiag`` [H, W] diag(D^T D) of the EPI block, ``cross`` [H, W] that of the
+    cross-channel block (zeros without it: the blocks are then diagonal, Jacobi)."""
+    blocks = (rho * np.asarray(kdiag, np.float64) + delta)[..., None, None] * np.eye(3)
+    blocks = blocks + rho * np.asarray(cross, np.float64)[..., None, None] * COLOUR_GRAM
+    return blocks + np.moveaxis(np.asarray(data, np.float64), 0, -1)[..., None] * np.eye(3)
+
+
+def epi_block_jacobi_np(blocks, r) -> np.ndarray:
+    """The twin of lfcl/kernels/epi.cl ``block_jacobi``: each pixel's colour block (:func:`epi_colour_blocks_np`)
+    solved for r [3, H, W]; a block that is not positive definite gives 0."""
+    rhs = np.moveaxis(np.asarray(r, np.float64), 0, -1)[..., None]
+    definite = np.linalg.det(blocks) > 0
+    safe = np.where(definite[..., None, None], blocks, np.eye(3))
+    return np.moveaxis(np.where(definite[..., None], np.linalg.solve(safe, rhs)[..., 0], 0.0), -1, 0)
 
 
 def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: AdmmParams, lam_fb: float, noise,

@@ -105,7 +105,7 @@ def admm_reference(b, pattern, pitch, dims, params: AdmmParams, x0, origin=(0, 0
 
 
 def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint, prior, prior_adjoint, diagonal,
-                   prior_weights=1.0, proximal: float = 0.0) -> AdmmResult:
+                   prior_weights=1.0, proximal: float = 0.0, precondition=None) -> AdmmResult:
     """Scaled-form ADMM for ``min_x 1/2 ||W^(1/2) (A x - b)||^2 + lam sum(w_K |K x|)`` in float64.
 
     The generic core of the reference solvers: ``forward``/``adjoint`` are A and A^T,
@@ -115,6 +115,7 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
     the diagonal of A^T W A + rho K^T K (the Jacobi preconditioner; entries <= 0 are
     left unpreconditioned as 0). The x-update is warm-started Jacobi-PCG. ``proximal`` > 0 adds
     ``proximal/2 ||x - x_k||^2`` to the x-update (proximal ADMM; the same fixed point), and to its diagonal.
+    ``precondition(r)``, if given, replaces the Jacobi preconditioner (it must include ``proximal`` itself).
     """
     b = np.asarray(b, dtype=np.float64)
     x = np.array(x0, dtype=np.float64)
@@ -133,8 +134,8 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
     history = []
     while True:
         x_next, steps = conjugate_gradient(
-            normal, Atb + rho * prior_adjoint(z - u) + proximal * x, x, lambda r: inverse_diagonal * r, params.cg_steps,
-            params.cg_tol
+            normal, Atb + rho * prior_adjoint(z - u) + proximal * x, x,
+            precondition if precondition is not None else lambda r: inverse_diagonal * r, params.cg_steps, params.cg_tol
         )
         dx = prior(x_next)
         v = dx + u
