@@ -401,8 +401,8 @@ class WindowAggregate:
         check_device_array(weights, self.weights_shape, "weights")
         out = output(self.runtime, out, self.maps_shape)
         chunks = -(-self.planes // AGGREGATE_CHUNK)
-        self.runtime.launch("depth_aggregate", "depth_aggregate", (-(-self.T // AGGREGATE_LANES), self.S, chunks), maps.data, weights.data,
-                            out.data, np.int32(self.S), np.int32(self.T), np.int32(self.planes),
-                            np.int32(self.radius), np.int32(first),
+        self.runtime.launch("depth_aggregate", "depth_aggregate", (-(-self.T // AGGREGATE_LANES), self.S, chunks),
+                            maps.data, weights.data, out.data, np.int32(self.S), np.int32(self.T),
+                            np.int32(self.planes), np.int32(self.radius), np.int32(first),
                             defines=(*grid_defines((1, 1), 0), ("CHUNK", AGGREGATE_CHUNK)))
         return out

@@ -71,8 +71,8 @@ __kernel void depth_aggregate(__global const float *maps, __global const float *
 // aperture, which must beat the full one by twice its own noise); where the score is lower than the best so far
 // (or `first`), the lens takes this aperture's curve, score and noise. Global size (T, S).
 __kernel void depth_take_aperture(__global const float *sums, __global float *curve, __global float *score,
-                                  __global float *noise, const int S, const int T, const int ND, const int half_aperture,
-                                  const int first)
+                                  __global float *noise, const int S, const int T, const int ND,
+                                  const int half_aperture, const int first)
 {
     const int t = get_global_id(0), s = get_global_id(1);
     if (t >= T || s >= S)
@@ -90,13 +90,15 @@ __kernel void depth_take_aperture(__global const float *sums, __global float *cu
         score[at] = mine;
         noise[at] = sigma;
         for (int k = 0; k < ND; ++k)
-            curve[(size_t)k * lenses + at] = sums[(size_t)k * lenses + at] / fmax(sums[(size_t)(ND + k) * lenses + at], 1e-12f);
+            curve[(size_t)k * lenses + at] =
+                sums[(size_t)k * lenses + at] / fmax(sums[(size_t)(ND + k) * lenses + at], 1e-12f);
     }
 }
 
 // The window weights (twin: lfcl/depth/estimate.py _window_weights): for window offset o = (dy, dx) of lens (s, t),
 // exp(-sum over colours of (guide[c][s + dy][t + dx] - guide[c][s][t])^2 scale[c][s][t]), 0 for a neighbour outside
-// the frame; `scale` = 1 / (3 nv sigma^2) per colour and lens. weights [(2R + 1)^2, S, T]. Global size (T, S, (2R + 1)^2).
+// the frame; `scale` = 1 / (3 nv sigma^2) per colour and lens. weights [(2R + 1)^2, S, T].
+// Global size (T, S, (2R + 1)^2).
 __kernel void depth_window_weights(__global const float *guide, __global const float *scale, __global float *weights,
                                    const int S, const int T, const int radius)
 {

@@ -16,8 +16,8 @@
 // Both work on runs of 16 columns of one row (col0 .. col0 + 15, one SIMD register on a CPU, as
 // gradient.cl). The lanes of a run have their own disparities, so instead of gathering per lane, a
 // kernel loops over the few lens offsets m that any lane's taps reach (`offsets`, tabulated per lens row
-// by the host from epi_lens_tap_spans, lfcl/ops/epi.py offset_table) and adds, per lane, the summed weight of its taps on that
-// lens times one contiguous 16-column load: vector loads only.
+// by the host from epi_lens_tap_spans, lfcl/ops/epi.py offset_table) and adds, per lane, the summed weight of its
+// taps on that lens times one contiguous 16-column load: vector loads only.
 //
 //   forward, u-block: x(s - d, t, u + 1, v) = sum_m [taps on lens s + m] x[row (s + m) U + u + 1, same cols]
 //   forward, v-block: x(s, t - d, u, v + 1) = sum_m [taps on lens t + m] x[same row, col + m V + 1]
@@ -313,7 +313,7 @@ __kernel void epi_rhs_finish(__global float *out, __global const float *b, __glo
 // C^T C (x) D^T D; 0 without it), m_c the data weight where the pixel measured colour c. The colour differences
 // couple a pixel's colours as strongly as the lines couple its neighbours; the diagonal alone left CG's residual
 // 1.7-2x higher after 5 steps (docs/admm.md, "The preconditioner"). Without the cross block (b = 0) it is the
-// diagonal (Jacobi). A block that is not positive definite (no prior, no data and no delta) gives 0.
+// diagonal (Jacobi). A singular block (no prior and no delta: a diagonal only where the pixel measured) gives 0.
 inline void block_jacobi(float16 own, float16 other, __global const float *weight_runs, int row, int16 cols,
                          int pattern, float rho, float delta, float16 *z0, float16 *z1, float16 *z2)
 {

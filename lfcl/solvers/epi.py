@@ -19,8 +19,8 @@ Scaled-form ADMM over the stacked blocks ``K = [K_epi; K_fb; K_xc]``, each with 
 ``A^T W A + rho K^T K`` couples neighbouring lenses, so the x-update is the shared preconditioned CG
 (lfcl/solvers/cg.py), preconditioned by each pixel's 3x3 colour block of the normal operator (the colour
 differences of the cross block couple a pixel's colours; ``diag(K^T K)`` from the operator's gather,
-EpiGradient.diagonal; lfcl/kernels/epi.cl ``block_jacobi``, twin :func:`epi_block_jacobi_np`). Everything runs on the device; the host sees only the reductions (CG's
-scalars and one wait per iteration for the history). The history records and the stop rule are those
+EpiGradient.diagonal; lfcl/kernels/epi.cl ``block_jacobi``, twin :func:`epi_block_jacobi_np`). Everything runs on
+the device; the host sees only the reductions (CG's scalars and one wait per iteration for the history). The history records and the stop rule are those
 of lfcl/solvers/admm.py (AdmmParams, IterationRecord, stop_reason): lam is ``params.lam``, lam_fb comes
 with the disparity in :class:`EpiPrior`.
 
@@ -585,8 +585,8 @@ def admm_epi_reference(b, pattern, pitch, params: AdmmParams, x0, prior: EpiPrio
     prior, prior_adjoint = main_prior, main_adjoint
     data = cfa_adjoint_np(w, pattern, origin)  # [3, H, W]: the data weight on each pixel's measured colour
     cross = np.zeros((H, W))
-    if params.cross_channel:
-        cross = epi_diagonal_np(disparity, pitch, matrix=M)  # K_xc = D_epi(d, w) C on the colour differences: K x flat, [K_main x; K_xc x]
+    if params.cross_channel:  # K_xc = D_epi(d, w) C on the colour differences: K x flat, [K_main x; K_xc x]
+        cross = epi_diagonal_np(disparity, pitch, matrix=M)  # its per-pixel colour block: this times C^T C
         split = 3 * K.shape[0]
 
         def stacked_prior(v):
