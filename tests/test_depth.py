@@ -83,6 +83,26 @@ def test_device_cost_volume_interior_box_matches_numpy(runtime, rng, S, T, U, V,
     assert inside and len(inside) < (s1 - s0) * (t1 - t0)
 
 
+def test_cost_volume_of_a_large_frame_matches_numpy_on_crops(runtime, rng):
+    """200x200 lenses, the search range of lfcl.depth's defaults: a box of 22 x 8 lenses by 183 rows, where PoCL, left to
+    choose the work-groups, made groups of ~4000 work-items whose private arrays overflowed its thread's stack (a
+    segmentation fault in `lfcl process` at this size). A lens's cost depends only on the lenses its taps reach, so the
+    twin on a crop around it gives its value (the crop's CFA phase as its origin)."""
+    S = T = 200
+    mosaic = rng.uniform(0.05, 0.5, (9 * S, 9 * T)).astype(np.float32)
+    ds = np.array([-2.0, 0.35, 2.0], np.float32)
+    op = CostVolume(runtime, mosaic.shape, "GRBG", 9, ds, halves=True)
+    assert op.box == (8, 191, 8, 184)
+    got = op.forward(runtime.to_device(mosaic), (1e-3, 1e-4), 0.99).get()
+    for s, t in ((8, 8), (100, 131), (190, 183), (3, 196)):  # box corners, inside, the edge ring
+        r0, c0 = max(0, s - 9), max(0, t - 9)
+        crop = mosaic[9 * r0:9 * min(S, s + 10), 9 * c0:9 * min(T, t + 10)]
+        want = np.stack([cost_volume_np(crop, "GRBG", 9, ds, origin=(9 * r0, 9 * c0), noise=(1e-3, 1e-4),
+                                        saturation=0.99, views=views)[..., s - r0, t - c0]
+                         for views in [None, *half_apertures(9, 9)]])
+        np.testing.assert_allclose(got[..., s, t], want, rtol=1e-4, atol=1e-5 * np.abs(want).max())
+
+
 def test_view_major_copy_and_unusable_lenses_match_numpy(runtime, rng):
     S, T, U, V = 3, 5, 4, 3
     mosaic = rng.uniform(0.0, 0.5, (S * U, T * V)).astype(np.float32)

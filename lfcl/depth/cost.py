@@ -165,6 +165,14 @@ def cost_volume_np(mosaic, pattern: str, pitch, disparities, *, origin=(0, 0), n
 
 
 COST_LANES = 8  # lenses per work-item of depth_cost_interior (lfcl/kernels/depth.cl)
+# The cost kernels' work-group: small, because a work-item holds 1-2.5 KB of private arrays and PoCL, left to choose,
+# made groups of ~4000 work-items that overflowed its thread's stack (a segmentation fault at 200x200 lenses).
+COST_GROUP = (8, 1, 1)
+
+
+def _whole_groups(size, group):
+    """``size`` rounded up to whole work-groups of ``group`` (the kernels check their own bounds)."""
+    return tuple(-(-int(n) // int(g)) * int(g) for n, g in zip(size, group))
 
 
 def tap_reach(disparities, U: int, V: int) -> tuple[int, int, int, int]:
@@ -308,15 +316,17 @@ class CostVolume:
                 self._geometry[key] = self.runtime.to_device(
                     cost_geometry(self.disparities, self.U, self.V, self.pattern, apertures))
             view_major = self.view_major(mosaic)
-            self.runtime.launch("depth", "depth_cost_interior", ((t1 - t0) // COST_LANES, s1 - s0, ND),
+            self.runtime.launch("depth", "depth_cost_interior", _whole_groups(((t1 - t0) // COST_LANES, s1 - s0, ND),
+                                                                           COST_GROUP),
                                 view_major.data, self._disparities.data, self._geometry[key].data, out.data, *common,
-                                np.int32(s0), np.int32(t0), *view_range, defines=self._defines())
+                                np.int32(s0), np.int32(t0), np.int32(s1), np.int32(t1), *view_range,
+                                local_size=COST_GROUP, defines=self._defines())
         listed = self._listed(mosaic, sat)
         if listed.size:
             lenses = self.runtime.to_device(listed)
-            self.runtime.launch("depth", "depth_cost", (listed.size, ND), mosaic.data, self._disparities.data,
-                                lenses.data, out.data, np.int32(listed.size), *common, sat, *view_range,
-                                defines=self._defines())
+            self.runtime.launch("depth", "depth_cost", _whole_groups((listed.size, ND), COST_GROUP[:2]),
+                                mosaic.data, self._disparities.data, lenses.data, out.data, np.int32(listed.size),
+                                *common, sat, *view_range, local_size=COST_GROUP[:2], defines=self._defines())
         return out
 
 

@@ -95,7 +95,7 @@ __kernel void depth_cost(__global const float *mosaic, __constant float *dispari
 {
     const int i = get_global_id(0);
     const int k = get_global_id(1);
-    if (i >= count || k >= ND)
+    if (i >= count || k >= ND)  // the global size is rounded up to whole work-groups (see depth_cost_interior)
         return;
     const int s = lenses[i] / T;
     const int t = lenses[i] - s * T;
@@ -197,18 +197,21 @@ __kernel void depth_cost(__global const float *mosaic, __constant float *dispari
 // every lens of the same row and column parity: the host tabulates them (`geometry`: [ND][NSUB][4 parities]
 // [3 colours][12], CostVolume's _geometry) and the kernel gathers only the 4 value sums per colour (w x, w x p_y,
 // w x p_x, w x^2), each colour by a lane mask. Global size ((t_hi - t_lo) / COST_LANES, s_hi - s_lo, ND) over a box
-// of such lenses; CostVolume lists the others for depth_cost.
+// of such lenses, rounded up to whole work-groups of a size the host sets: a work-item holds ~2.5 KB of private
+// arrays, and PoCL, left to choose, made work-groups of ~4000 work-items whose private memory overflowed its
+// thread's stack (a crash at 200x200 lenses). CostVolume lists the others for depth_cost.
 #define COST_LANES 8
 __kernel void depth_cost_interior(__global const float *views, __constant float *disparities,
                                   __global const float *geometry, __global float *cost,
                                   const int S, const int T, const int ND, const int pattern,
                                   const float gain, const float floor_var, const int s_lo, const int t_lo,
-                                  const int u_lo, const int u_hi, const int v_lo, const int v_hi)
+                                  const int s_hi, const int t_hi, const int u_lo, const int u_hi, const int v_lo,
+                                  const int v_hi)
 {
     const int t0 = t_lo + COST_LANES * get_global_id(0);
     const int s = s_lo + get_global_id(1);
     const int k = get_global_id(2);
-    if (t0 + COST_LANES > T || s >= S || k >= ND)
+    if (t0 + COST_LANES > t_hi || s >= s_hi || k >= ND)  // the global size is rounded up to whole work-groups
         return;
     const size_t plane = (size_t)S * T;
     const size_t lens = (size_t)s * T + t0;
