@@ -20,9 +20,9 @@ Scaled-form ADMM over the stacked blocks ``K = [K_epi; K_fb; K_xc]``, each with 
 (lfcl/solvers/cg.py), preconditioned by each pixel's 3x3 colour block of the normal operator (the colour
 differences of the cross block couple a pixel's colours; ``diag(K^T K)`` from the operator's gather,
 EpiGradient.diagonal; lfcl/kernels/epi.cl ``block_jacobi``, twin :func:`epi_block_jacobi_np`). Everything runs on
-the device; the host sees only the reductions (CG's scalars and one wait per iteration for the history). The history records and the stop rule are those
-of lfcl/solvers/admm.py (AdmmParams, IterationRecord, stop_reason): lam is ``params.lam``, lam_fb comes
-with the disparity in :class:`EpiPrior`.
+the device; the host sees only the reductions (CG's scalars and one wait per iteration for the history). The
+history records and the stop rule are those of lfcl/solvers/admm.py (AdmmParams, IterationRecord, stop_reason):
+lam is ``params.lam``, lam_fb comes with the disparity in :class:`EpiPrior`.
 
 This is a solver beside :class:`lfcl.solvers.admm.AdmmSolver` rather than a mode of it because that
 solver's kernels fuse D over the (u, v, s, t) stencils into the normal operator, the right-hand side
@@ -605,7 +605,6 @@ def admm_epi_reference(b, pattern, pitch, params: AdmmParams, x0, prior: EpiPrio
         adjoint=lambda r: cfa_adjoint_np(r, pattern, origin),
         prior=prior,
         prior_adjoint=prior_adjoint,
-        diagonal=np.diagonal(blocks, axis1=-2, axis2=-1).transpose(2, 0, 1),
         prior_weights=prior_weights,
         proximal=EPI_PROXIMAL * params.rho,
         precondition=lambda r: epi_block_jacobi_np(blocks, r),

@@ -104,8 +104,8 @@ def admm_reference(b, pattern, pitch, dims, params: AdmmParams, x0, origin=(0, 0
     return result
 
 
-def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint, prior, prior_adjoint, diagonal,
-                   prior_weights=1.0, proximal: float = 0.0, precondition=None) -> AdmmResult:
+def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint, prior, prior_adjoint,
+                   diagonal=None, prior_weights=1.0, proximal: float = 0.0, precondition=None) -> AdmmResult:
     """Scaled-form ADMM for ``min_x 1/2 ||W^(1/2) (A x - b)||^2 + lam sum(w_K |K x|)`` in float64.
 
     The generic core of the reference solvers: ``forward``/``adjoint`` are A and A^T,
@@ -115,7 +115,8 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
     the diagonal of A^T W A + rho K^T K (the Jacobi preconditioner; entries <= 0 are
     left unpreconditioned as 0). The x-update is warm-started Jacobi-PCG. ``proximal`` > 0 adds
     ``proximal/2 ||x - x_k||^2`` to the x-update (proximal ADMM; the same fixed point), and to its diagonal.
-    ``precondition(r)``, if given, replaces the Jacobi preconditioner (it must include ``proximal`` itself).
+    ``precondition(r)``, if given, replaces the Jacobi preconditioner (it must include ``proximal`` itself; no
+    ``diagonal`` then).
     """
     b = np.asarray(b, dtype=np.float64)
     x = np.array(x0, dtype=np.float64)
@@ -125,8 +126,12 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
     def normal(v):
         return adjoint(data_weights * forward(v)) + rho * prior_adjoint(prior(v)) + proximal * v
 
-    diagonal = np.asarray(diagonal, dtype=np.float64) + proximal
-    inverse_diagonal = np.divide(1.0, diagonal, out=np.zeros_like(diagonal), where=diagonal > 0)
+    if precondition is None:
+        diagonal = np.asarray(diagonal, dtype=np.float64) + proximal
+        inverse_diagonal = np.divide(1.0, diagonal, out=np.zeros_like(diagonal), where=diagonal > 0)
+
+        def precondition(r):
+            return inverse_diagonal * r
 
     Atb = adjoint(data_weights * b)
     z = prior(x)
@@ -134,8 +139,7 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
     history = []
     while True:
         x_next, steps = conjugate_gradient(
-            normal, Atb + rho * prior_adjoint(z - u) + proximal * x, x,
-            precondition if precondition is not None else lambda r: inverse_diagonal * r, params.cg_steps, params.cg_tol
+            normal, Atb + rho * prior_adjoint(z - u) + proximal * x, x, precondition, params.cg_steps, params.cg_tol
         )
         dx = prior(x_next)
         v = dx + u
