@@ -108,9 +108,9 @@ class EpiSetting:
 EPI_SCHEDULE = (  # the median sigma of the training captures at 0.5, 2, 12 and 50 lux
     EpiSetting(sigma=1.03e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.02, iterations=20, start="guarded",
                xc_per_lam=1.0, depth_step=0.2),
-    EpiSetting(sigma=1.92e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.05, iterations=20, start="guarded",
+    EpiSetting(sigma=1.92e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.05, iterations=40, start="guarded",
                xc_per_lam=1.0, depth_step=0.2),
-    EpiSetting(sigma=4.6e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.05, iterations=20, start="guarded",
+    EpiSetting(sigma=4.6e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.05, iterations=40, start="guarded",
                xc_per_lam=1.0, depth_step=0.2),
     EpiSetting(sigma=9.24e-3, lam_per_sigma=0.4, fb_per_lam=0.0, change_per_sigma=0.05, iterations=20, start="guarded",
                xc_per_lam=1.0, depth_step=0.1),
