@@ -453,3 +453,33 @@ def test_device_window_aggregation_matches_numpy(runtime, rng, planes, lenses, r
     with pytest.raises(ValueError, match="no planes"):
         WindowAggregate(runtime, planes, lenses, radius).forward(runtime.to_device(stack),
                                                                  runtime.to_device(weights), first=3)
+
+
+def test_depth_preview_ranges_over_the_sure_lenses_and_darkens_the_unsure():
+    from matplotlib import colormaps
+
+    from lfcl.depth.estimate import DisparityMap
+    from lfcl.depth.output import UNSURE_BRIGHTNESS, preview, preview_range
+
+    rng = np.random.default_rng(4)
+    d = rng.uniform(-2, 2, (40, 50)).astype(np.float32)  # flat lenses: any candidate
+    c = np.zeros_like(d)
+    d[:20] = np.linspace(-0.3, 0.4, 50, dtype=np.float32)  # the scene, where the estimate is sure
+    c[:20] = 1.0
+    c[20:25] = 0.4  # unsure: outside the range, half-dark
+    depth = DisparityMap(d, c, 2.0, 0.05, {}, {}, {})
+    lo, hi = preview_range(depth)
+    sure = d[c >= 0.5]
+    assert (lo, hi) == tuple(float(v) for v in np.percentile(sure.astype(np.float64), [1, 99]))
+    assert -0.31 < lo < hi < 0.41
+    image = preview(depth)
+    colour = colormaps["viridis"](np.clip((d.astype(np.float64) - lo) / (hi - lo), 0, 1))[..., :3]
+    np.testing.assert_allclose(image[:20], colour[:20], atol=1e-6)  # sure: the map's colour
+    np.testing.assert_allclose(image[25:], UNSURE_BRIGHTNESS * colour[25:], atol=1e-6)  # unknown: darkened
+    np.testing.assert_allclose(image[20:25], (UNSURE_BRIGHTNESS + 0.4 * (1 - UNSURE_BRIGHTNESS)) * colour[20:25],
+                               atol=1e-6)
+    # hardly any sure lens: the range of every lens
+    c_few = np.zeros_like(c)
+    c_few[0, :10] = 1.0  # 10 of 2000 lenses, under 1 %
+    lo, hi = preview_range(DisparityMap(d, c_few, 2.0, 0.05, {}, {}, {}))
+    assert (lo, hi) == tuple(float(v) for v in np.percentile(d.astype(np.float64), [1, 99]))
