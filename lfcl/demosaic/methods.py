@@ -82,7 +82,7 @@ ADMM_DEFAULTS = {
     # (docs/admm.md, "admm-epi"; training seeds 1, 2 of charts, deadleaves, finetexture, 48x48 lenses).
     # lam, lam_fb, the stop and the start follow the noise by lfcl/solvers/epi.py EPI_SCHEDULE (its rows
     # at 2-12 lux are these values); this entry gives rho, the CG steps and the tolerance_db path.
-    "admm-epi": AdmmDefaults(dims="epi", lam_per_sigma=0.2, change_per_sigma=0.05, max_iter=20, rho=1.0, cg_steps=5,
+    "admm-epi": AdmmDefaults(dims="epi", lam_per_sigma=0.2, change_per_sigma=0.05, max_iter=40, rho=1.0, cg_steps=5,
                              fb_per_sigma=0.0),
 }
 
