@@ -365,17 +365,20 @@ class WindowAggregate:
         self.maps_shape = (self.planes, self.S, self.T)
         self.weights_shape = ((2 * self.radius + 1) ** 2, self.S, self.T)
 
+    def _defines(self):
+        from ..device import grid_defines
+
+        return (*grid_defines((1, 1), 0), ("CHUNK", AGGREGATE_CHUNK))
+
     def weights(self, guide, scale):
         """The window weights ``[(2R + 1)^2, S, T]`` on the device from the host guide and its scale ``[3, S, T]``
         (kernel ``depth_window_weights``; twin :func:`lfcl.depth.estimate._window_weights`, 0.55 s on the host at
         500x500 lenses, then 81 MB to upload)."""
-        from ..device import grid_defines
-
         out = self.runtime.empty(((2 * self.radius + 1) ** 2, self.S, self.T))
         guide, scale = (self.runtime.to_device(np.ascontiguousarray(a, dtype=np.float32)) for a in (guide, scale))
         self.runtime.launch("depth_aggregate", "depth_window_weights", (self.T, self.S, out.shape[0]), guide.data,
                             scale.data, out.data, np.int32(self.S), np.int32(self.T), np.int32(self.radius),
-                            defines=(*grid_defines((1, 1), 0), ("CHUNK", AGGREGATE_CHUNK)))
+                            defines=self._defines())
         return out
 
     def take_aperture(self, sums, best, half: bool, first: bool):
@@ -383,7 +386,6 @@ class WindowAggregate:
         :func:`lfcl.depth.estimate.take_aperture_np`): ``sums`` an aperture's window sums ``[2 ND, S, T]`` (excess,
         weight; ``planes`` = 2 ND), ``best`` the device arrays (curve ``[ND, S, T]``, score ``[S, T]``, noise
         ``[S, T]``) updated in place where this aperture's score is lower (``first``: everywhere)."""
-        from ..device import grid_defines
         from ..ops import check_device_array
 
         ND = self.planes // 2
@@ -395,13 +397,12 @@ class WindowAggregate:
         self.runtime.launch("depth_aggregate", "depth_take_aperture", (self.T, self.S), sums.data, curve.data,
                             score.data, noise.data, np.int32(self.S), np.int32(self.T), np.int32(ND),
                             np.int32(bool(half)), np.int32(bool(first)),
-                            defines=(*grid_defines((1, 1), 0), ("CHUNK", AGGREGATE_CHUNK)))
+                            defines=self._defines())
 
     def forward(self, maps, weights, out=None, first: int = 0):
         """``[P, S, T]`` float32 device maps, ``[(2R + 1)^2, S, T]`` device weights -> ``[P, S, T]`` window sums;
         ``first``: the P maps start at that plane of a larger ``[N, S, T]`` stack (one aperture of a
         :class:`CostVolume` with the half apertures, without a copy)."""
-        from ..device import grid_defines
         from ..ops import check_device_array, output
 
         stack = max(maps.shape[0], self.planes) if len(maps.shape) == 3 else self.planes
@@ -414,5 +415,5 @@ class WindowAggregate:
         self.runtime.launch("depth_aggregate", "depth_aggregate", (-(-self.T // AGGREGATE_LANES), self.S, chunks),
                             maps.data, weights.data, out.data, np.int32(self.S), np.int32(self.T),
                             np.int32(self.planes), np.int32(self.radius), np.int32(first),
-                            defines=(*grid_defines((1, 1), 0), ("CHUNK", AGGREGATE_CHUNK)))
+                            defines=self._defines())
         return out
