@@ -101,6 +101,30 @@ def test_a_costly_candidate_takes_a_band_only_by_the_margin_over_the_cheap_pick(
     assert "cheap_pick" not in fit_rule(cheap, "both")[0]
 
 
+@pytest.mark.parametrize("dark_worst, taken", [(0.45, False), (0.55, True), (1.45, True)])
+def test_a_costly_candidate_keeps_the_darker_bands_where_it_is_no_worse(dark_worst, taken):
+    # two bands a quarter decade apart; the cheap pick's worst case is +0.5 dB in both, and the costly
+    # candidate's in the dark band beats it by less than the 1 dB margin in every case
+    dark = [_row(0.0011, {"admm-uv@1": (2.0, 0.5), "admm-epi@1": (5.0, dark_worst)})]
+    bright = [_row(0.0025, {"admm-uv@1": (2.0, 0.5), "admm-epi@1": (4.0, 1.6)})]  # beats it by 1.1 dB: it pays
+    bands = fit_rule(dark + bright, "both")
+    # the dark band goes with the paying band above it unless the costly worst case is below the cheap pick's
+    assert [b["candidate"] for b in bands] == (["admm-epi@1"] if taken else ["admm-uv@1", "admm-epi@1"])
+    if taken:
+        assert bands[0]["captures"] == 2 and bands[0]["worst_gain_db"] == pytest.approx(dark_worst)
+        assert bands[0]["cheap_pick"]["candidate"] == "admm-uv@1"
+        assert "in darker bands where it is no worse" in choose(0.0011, bands).reason
+    # without a paying band above it, the dark band stays with the cheap pick
+    flat = [_row(0.0025, {"admm-uv@1": (2.0, 0.5), "admm-epi@1": (4.0, 1.4)})]
+    assert [b["candidate"] for b in fit_rule(dark + flat, "both")] == ["admm-uv@1"]
+
+
+def test_a_paying_dark_band_does_not_take_a_brighter_one():
+    dark = [_row(0.0011, {"admm-uv@1": (2.0, 0.5), "admm-epi@1": (5.0, 1.6)})]  # pays: +1.1 dB over admm-uv
+    bright = [_row(0.0025, {"admm-uv@1": (2.0, 0.5), "admm-epi@1": (4.0, 1.4)})]  # no worse, does not pay
+    assert [b["candidate"] for b in fit_rule(dark + bright, "both")] == ["admm-epi@1", "admm-uv@1"]
+
+
 def test_fit_rule_bands_are_contiguous_and_merge_equal_neighbours():
     rows = [_row(s, {"admm-uv@1": (1.0, 0.2), "admm-uvst@1": (0.5, 0.1)}) for s in (0.0011, 0.002, 0.0035)]
     rows.append(_row(0.009, {"admm-uv@1": (-1.0, 0.2), "admm-uvst@1": (0.5, 0.1)}))
@@ -176,13 +200,14 @@ def test_choose_records_the_view_and_refuses_an_unknown_one():
 
 def test_auto_runs_the_chosen_method_and_records_why(rng):
     mosaic = (0.3 + 0.02 * rng.standard_normal((36, 36))).astype(np.float32)
-    noise = NoiseEstimate(gain=0.0, floor=0.004**2, sigma=0.004, source="test")
+    noise = NoiseEstimate(gain=0.0, floor=0.008**2, sigma=0.008, source="test")  # a cheap pick's band
     auto = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "auto", noise=noise)
-    choice = choose(0.004, lens_ratio=auto.parameters["auto"]["lens_ratio"])
+    choice = choose(0.008, lens_ratio=auto.parameters["auto"]["lens_ratio"])
+    assert choice.method != "admm-epi" and choice.start is not None
     direct = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), choice.method, noise=noise, strength=choice.strength,
                            start=choice.start)
     assert auto.method == choice.method and auto.parameters["start"] == choice.start
-    assert auto.parameters["auto"]["method"] == choice.method and "sigma 0.004" in auto.parameters["auto"]["reason"]
+    assert auto.parameters["auto"]["method"] == choice.method and "sigma 0.008" in auto.parameters["auto"]["reason"]
     np.testing.assert_array_equal(auto.planes, direct.planes)
 
 

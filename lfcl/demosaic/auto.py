@@ -9,7 +9,8 @@ runs it (the safety net on). In each band it holds the candidate (method, lambda
 of the largest median gain (:func:`fit_rule`): Malvar is a candidate, so a pick is never more than
 ``TIE_DB`` below Malvar on its training captures ("never worse than Malvar", docs/auto.md). A costly method
 (``COSTLY_METHODS``: admm-epi) takes a band only where its worst-case gain beats the cheap pick's by
-``COSTLY_MARGIN_DB``: in low light (docs/auto.md, "admm-epi at low light"). A sigma outside the trained range
+``COSTLY_MARGIN_DB``, and the darker bands where it is no worse: in low light (docs/auto.md, "admm-epi at
+low light"). A sigma outside the trained range
 takes the nearest band, and the reason says so.
 
 The gains can be judged on both views (the lower of the two, the default) or on one of them: the
@@ -51,10 +52,11 @@ VIEW_WORDS = {"both": "centre view or mean image, whichever is worse", "center":
 #: worst case are ranked by their median gain.
 BANDS_PER_DECADE = 4
 TIE_DB = 0.1
-#: Methods that cost a multiple of the others' time: admm-epi took 9.6-12.4x admm-uv's time end to end at 500x500
-#: lenses on 2 CPU cores (`lfcl bench process`, BENCHMARKS.md). A costly candidate takes a band only where its worst-case gain over
+#: Methods that cost a multiple of the others' time: admm-epi took 5.2-11.1x admm-uv's time end to end at 500x500
+#: lenses on 2 CPU cores (2 and 12 lux; `lfcl bench process`, BENCHMARKS.md). A costly candidate takes a band only where its worst-case gain over
 #: Malvar beats the best cheap candidate's by COSTLY_MARGIN_DB (issue 20's margin over today's best method at
-#: low light), so that the time buys a gain on every training capture of the band, not on average.
+#: low light), so that the time buys a gain on every training capture of the band, not on average; and the
+#: darker bands where it is no worse than the cheap pick (costly_picks).
 COSTLY_METHODS = ("admm-epi",)
 COSTLY_MARGIN_DB = 1.0
 #: Methods whose start, where a candidate names none, is their own rule's rather than Malvar: admm-epi's follows
@@ -174,25 +176,56 @@ def is_costly(candidate: str) -> bool:
     return candidate != "malvar" and parse_candidate(candidate)[0] in COSTLY_METHODS
 
 
+def _cheap_band(rows: list[dict], lo: float, hi: float, view: str, tie_db: float) -> dict:
+    """:func:`_band` among the cheap candidates only (every candidate but :data:`COSTLY_METHODS`)."""
+    cheap_rows = [{**r, "gains": {c: g for c, g in r["gains"].items() if not is_costly(c)}} for r in rows]
+    return _band(cheap_rows, lo, hi, view, tie_db)
+
+
+def _costly_case(rows: list[dict], lo: float, hi: float, view: str, tie_db: float) -> dict | None:
+    """The best costly candidate of the band (its worst case, then its median) and its worst-case gain over
+    the cheap pick's: None where the rows hold no costly candidate."""
+    band = _band(rows, lo, hi, view, tie_db)
+    costly = [c for c in band["worst_gains_db"] if is_costly(c)]
+    if not costly:
+        return None
+    best = max(costly, key=lambda c: (band["worst_gains_db"][c], band["median_gains_db"][c]))
+    cheap = _cheap_band(rows, lo, hi, view, tie_db)
+    return {"candidate": best, "over_cheap_db": band["worst_gains_db"][best] - cheap["worst_gain_db"]}
+
+
 def _pick(rows: list[dict], lo: float, hi: float, view: str, tie_db: float, margin_db: float,
           pick: str | None = None) -> dict:
-    """The band of :func:`fit_rule` over ``rows`` (``pick``, or the pick among the cheap candidates unless a
-    costly one, :data:`COSTLY_METHODS`, beats that pick's worst-case gain by ``margin_db``), with the cheap pick
-    recorded."""
-    band = _band(rows, lo, hi, view, tie_db)
-    costly = sorted(c for c in band["worst_gains_db"] if is_costly(c))
-    if not costly:
-        return band if pick is None else _band(rows, lo, hi, view, tie_db, pick)
-    cheap_rows = [{**r, "gains": {c: g for c, g in r["gains"].items() if not is_costly(c)}} for r in rows]
-    cheap = _band(cheap_rows, lo, hi, view, tie_db)
-    if pick is None:
-        best = max(costly, key=lambda c: (band["worst_gains_db"][c], band["median_gains_db"][c]))
-        pick = best if band["worst_gains_db"][best] >= cheap["worst_gain_db"] + margin_db else cheap["candidate"]
-    band = _band(rows, lo, hi, view, tie_db, pick)
-    band["cheap_pick"] = {"candidate": cheap["candidate"], "worst_gain_db": cheap["worst_gain_db"],
-                          "median_gain_db": cheap["median_gain_db"]}
-    band["costly_margin_db"] = margin_db
+    """The band of :func:`fit_rule` over ``rows``: ``pick``, or else the cheap pick; with the cheap pick and
+    the margin recorded where the rows hold a costly candidate."""
+    cheap = _cheap_band(rows, lo, hi, view, tie_db)
+    band = _band(rows, lo, hi, view, tie_db, pick or cheap["candidate"])
+    if any(is_costly(c) for c in band["worst_gains_db"]):
+        band["cheap_pick"] = {"candidate": cheap["candidate"], "worst_gain_db": cheap["worst_gain_db"],
+                              "median_gain_db": cheap["median_gain_db"]}
+        band["costly_margin_db"] = margin_db
     return band
+
+
+def costly_picks(cases: list[dict | None], margin_db: float) -> list[str | None]:
+    """Per band, darkest first (:func:`_costly_case`'s), the costly candidate that takes it, or None.
+
+    A costly candidate takes the bands where its worst-case gain beats the cheap pick's by ``margin_db``, and
+    every darker band where it is at least the cheap pick's: its gain comes from averaging along the epipolar
+    lines, which pays more the darker the raw, so a darker band's worst case a few hundredths short of the
+    margin is one capture's spread, not a reason to give the band back (docs/auto.md, "admm-epi at low light").
+    """
+    picks: list[str | None] = [None] * len(cases)
+    paying = None
+    for k in reversed(range(len(cases))):
+        case = cases[k]
+        if case is None:
+            continue
+        if case["over_cheap_db"] >= margin_db:
+            paying = case["candidate"]
+        if paying is not None and case["over_cheap_db"] >= 0.0:
+            picks[k] = case["candidate"]
+    return picks
 
 
 def fit_rule(rows: list[dict], view: str, tie_db: float = TIE_DB, margin_db: float = COSTLY_MARGIN_DB
@@ -200,19 +233,20 @@ def fit_rule(rows: list[dict], view: str, tie_db: float = TIE_DB, margin_db: flo
     """The sigma bands of ``rows`` (research/fit_auto.py) with, in each, the candidate of the best worst-case
     gain over Malvar on ``view``; among those within ``tie_db`` of it, the one of the largest median
     :func:`row_merit` (the gain; for ``both`` the mean of the two views' gains). Costly candidates
-    (:data:`COSTLY_METHODS`) are left out of that choice, and take the band instead only where their worst-case
-    gain is at least ``margin_db`` above the cheap pick's.
+    (:data:`COSTLY_METHODS`) are left out of that choice, and take the band instead where their worst-case
+    gain is at least ``margin_db`` above the cheap pick's, and in the darker bands where it is at least the
+    cheap pick's (:func:`costly_picks`).
 
     Malvar is a candidate (gain 0), so no band's pick is more than ``tie_db`` worse than Malvar on any
     of its training captures. Neighbouring bands with the same pick are merged.
     """
     edges = _band_edges(rows)
+    spans = [(lo, hi, [r for r in rows if lo <= r["sigma"] < hi]) for lo, hi in itertools.pairwise(edges)]
+    spans = [span for span in spans if span[2]]
+    costly = costly_picks([_costly_case(inside, lo, hi, view, tie_db) for lo, hi, inside in spans], margin_db)
     bands = []
-    for lo, hi in itertools.pairwise(edges):
-        inside = [r for r in rows if lo <= r["sigma"] < hi]
-        if not inside:
-            continue
-        band = _pick(inside, lo, hi, view, tie_db, margin_db)
+    for (lo, hi, inside), pick in zip(spans, costly):
+        band = _pick(inside, lo, hi, view, tie_db, margin_db, pick)
         if bands and bands[-1]["candidate"] == band["candidate"]:
             lo = bands.pop()["sigma_from"]
             band = _pick([r for r in rows if lo <= r["sigma"] < hi], lo, hi, view, tie_db, margin_db,
@@ -232,7 +266,8 @@ def fit_rules(rows: list[dict], tie_db: float = TIE_DB, margin_db: float = COSTL
     return {"criterion": "per sigma band, the candidate of the best worst-case PSNR gain over Malvar on the "
                          f"training captures (lower of centre view and mean image for 'both'); within {tie_db:g} "
                          f"dB of it, the largest median gain; a costly method ({', '.join(COSTLY_METHODS)}) only "
-                         f"where its worst-case gain beats the cheap pick's by {margin_db:g} dB",
+                         f"where its worst-case gain beats the cheap pick's by {margin_db:g} dB, and in the "
+                         "darker bands where it is no worse than the cheap pick's",
             "captures": sorted({r["capture"] for r in rows}),
             "rules": rules}
 
@@ -317,9 +352,9 @@ def choose(sigma: float, rule=None, lens_ratio: float | None = None, view: str =
     method, strength, start = parse_candidate(band["candidate"])
     cheap = band.get("cheap_pick")
     if cheap is not None and is_costly(band["candidate"]):
-        why = (f"{band['candidate']}'s worst-case PSNR gain over Malvar ({VIEW_WORDS[view]}) beat the cheaper "
-               f"methods' best, {cheap['candidate']}'s {cheap['worst_gain_db']:+.2f} dB, by at least "
-               f"{band['costly_margin_db']:g} dB")
+        why = (f"{band['candidate']}'s worst-case PSNR gain over Malvar ({VIEW_WORDS[view]}) against the cheaper "
+               f"methods' best, {cheap['candidate']}'s {cheap['worst_gain_db']:+.2f} dB (a costly method runs where "
+               f"it beats that by {band['costly_margin_db']:g} dB, and in darker bands where it is no worse)")
     else:
         why = (f"{band['candidate']} had the best worst-case PSNR gain over Malvar ({VIEW_WORDS[view]}), within "
                f"{band['tie_db']:g} dB, and the largest median gain")
