@@ -164,8 +164,9 @@ def test_shipped_rule_is_what_the_fit_gives_on_its_training_rows():
     for row in rows:  # what the shipped rule was fitted without (research/fit_auto.py rule --drop)
         row["gains"] = {c: g for c, g in row["gains"].items() if c not in dropped}
     refit = fit_rules(rows)
-    assert {v: [b["candidate"] for b in bands] for v, bands in refit["rules"].items()} == \
-        {v: [b["candidate"] for b in bands] for v, bands in shipped["rules"].items()}
+    for rules in ("rules", "cheap_rules"):
+        assert {v: [b["candidate"] for b in bands] for v, bands in refit[rules].items()} == \
+            {v: [b["candidate"] for b in bands] for v, bands in shipped[rules].items()}, rules
     for view in ("both", "center", "mean"):
         bands = load_rule(view)
         assert all(b["view"] == view for b in bands)
@@ -227,6 +228,33 @@ def test_auto_at_low_light_runs_admm_epi_from_its_own_start(rng):
     # where admm-epi costs more than it gains over the cheap pick, the cheap pick stays
     assert choose(0.009).method != "admm-epi" and choose(0.009, view="center").method != "admm-epi"
 
+
+
+def test_auto_cheap_never_picks_a_costly_method_and_stays_safe():
+    from lfcl.demosaic.auto import COSTLY_METHODS, VIEWS
+
+    for view in VIEWS:
+        cheap = load_rule(view, costly=False)
+        assert all(b["worst_gain_db"] >= -b["tie_db"] for b in cheap)  # never worse than Malvar on training
+        assert not any(parse_candidate(b["candidate"])[0] in COSTLY_METHODS for b in cheap)
+        for sigma in np.geomspace(2e-4, 5e-2, 25):
+            choice = choose(float(sigma), view=view, costly=False)
+            assert choice.method not in COSTLY_METHODS and choice.costly is False
+            assert choice.reason.startswith("without the costly methods (admm-epi): ")
+            assert choose(float(sigma), view=view).costly is True
+    # where the shipped rule runs admm-epi, the cheap rule runs what it would have run without it
+    assert choose(0.0015).method == "admm-epi" and choose(0.0015, costly=False).method == "admm-uv-xc"
+
+
+def test_auto_cheap_runs_the_cheap_rule_s_pick(rng):
+    mosaic = (0.3 + 0.02 * rng.standard_normal((36, 36))).astype(np.float32)
+    noise = NoiseEstimate(gain=0.0, floor=0.0015**2, sigma=0.0015, source="test")
+    auto = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "auto", noise=noise, auto_costly=False)
+    choice = choose(0.0015, lens_ratio=auto.parameters["auto"]["lens_ratio"], costly=False)
+    direct = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), choice.method, noise=noise, strength=choice.strength,
+                           start=choice.start)
+    assert auto.method == choice.method != "admm-epi" and auto.parameters["auto"]["costly"] is False
+    np.testing.assert_array_equal(auto.planes, direct.planes)
 
 
 def test_bands_of_lens_rows_each_stop_on_their_own_rule(rng):

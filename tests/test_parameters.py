@@ -103,8 +103,8 @@ def test_a_method_and_its_start_are_one_spelling(tmp_path):
 
 def test_every_recipe_key_is_a_schema_field_and_a_click_option():
     keys = {e.key: e for e in P.recipe_entries()}
-    assert list(DEFAULTS) == ["description", "method", "strength", "lambda", "iterations", "outputs", "refocus",
-                              "format", "previews"]  # the order recipes record them in (summary.json)
+    assert list(DEFAULTS) == ["description", "method", "strength", "lambda", "iterations", "auto_costly", "outputs",
+                              "refocus", "format", "previews"]  # the order recipes record them in (summary.json)
     assert set(DEFAULTS) - {"description"} == set(keys)
     params = click_params(process_command.command)
     assert {e.cli_name: e.key for e in keys.values()} == process_command.RECIPE_KEYS
@@ -116,7 +116,8 @@ def test_every_recipe_key_is_a_schema_field_and_a_click_option():
 def test_defaults_agree_click_recipe_dataclass():
     # the recipe defaults, as they were written out before the schema
     assert DEFAULTS == {"description": "", "method": DEFAULT_METHOD, "strength": 1.0, "lambda": None,
-                        "iterations": None, "outputs": ["center", "mean", "lightfield"], "refocus": "-1:1:0.25",
+                        "iterations": None, "auto_costly": True, "outputs": ["center", "mean", "lightfield"],
+                        "refocus": "-1:1:0.25",
                         "format": "exr", "previews": True}
     default_toml = load_recipe("default")
     assert {k: default_toml[k] for k in DEFAULTS if k != "description"} == {k: v for k, v in DEFAULTS.items()
@@ -142,6 +143,7 @@ def test_defaults_agree_click_recipe_dataclass():
     assert cli_options == Pipeline([Decode(), Grid(), Demosaic(auto_view="both"), Outputs()]).options()
     assert cli_options == pipeline_from_recipe("default").options()
     assert cli_options["strength"] == 1.0 and cli_options["safety_net"] is True and cli_options["pitch"] is None
+    assert cli_options["auto_costly"] is True
     assert settings == process_command.ProcessSettings(method="auto", outputs=("center", "mean", "lightfield"), fmt="exr",
                                                        previews=True, strength=1.0, safety_net=True)
 

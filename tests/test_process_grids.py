@@ -207,6 +207,31 @@ def _rules(both, **views):
     return {"rules": {"both": both, "center": views.get("center", both), "mean": views.get("mean", both)}}
 
 
+def test_auto_cheap_takes_the_rule_fitted_without_the_costly_methods(captures, monkeypatch, tmp_path):
+    import lfcl.demosaic.auto
+
+    rules = {**_rules(_rule("admm-st@1", {"malvar": 0.0, "admm-st@1": 0.2})),
+             "cheap_rules": _rules(_rule("admm-uv@1", {"malvar": 0.0, "admm-uv@1": 0.1}))["rules"]}
+    monkeypatch.setattr(lfcl.demosaic.auto, "load_rules", lambda: rules)
+    runs = {}
+    for flag in ("--auto-costly", "--auto-cheap"):
+        out = tmp_path / flag
+        result = invoke("process", captures / "aligned" / "raw.dng", "--calibration", captures / "aligned" / "cal.json",
+                        flag, "-o", out, "--outputs", "center", "--no-previews", "--json")
+        assert result.exit_code == 0, result.output
+        runs[flag] = json.loads(result.output)
+    assert runs["--auto-costly"]["parameters"]["auto"]["method"] == "admm-st"
+    cheap = runs["--auto-cheap"]
+    assert cheap["parameters"]["auto"]["method"] == "admm-uv" and cheap["parameters"]["auto"]["costly"] is False
+    assert cheap["parameters"]["auto"]["reason"].startswith("without the costly methods (admm-epi): ")
+    assert cheap["options"]["auto_costly"] is False and runs["--auto-costly"]["options"]["auto_costly"] is True
+    # a method other than auto does not record the switch
+    out = tmp_path / "uv"
+    result = invoke("process", captures / "aligned" / "raw.dng", "--calibration", captures / "aligned" / "cal.json",
+                    "--method", "admm-uv", "--auto-cheap", "-o", out, "--outputs", "center", "--no-previews", "--json")
+    assert result.exit_code == 0 and "auto_costly" not in json.loads(result.output)["options"]
+
+
 def test_auto_lists_what_it_skipped_for_a_safer_method(captures, monkeypatch, tmp_path):
     import lfcl.demosaic.auto
 

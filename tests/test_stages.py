@@ -65,6 +65,9 @@ def test_recipes_by_name_and_path(tmp_path):
     assert recipe["iterations"] == 3 and recipe["name"] == "mine"
     assert recipe["strength"] == DEFAULTS["strength"] and recipe["lambda"] is None  # defaults filled in
     assert load_recipe(str(path)) == recipe
+    assert recipe["auto_costly"] is True
+    path.write_text("auto_costly = false\n")  # auto without its costly methods, as --auto-cheap
+    assert pipeline_from_recipe(load_recipe(path)).options()["auto_costly"] is False
 
 
 @pytest.mark.parametrize("text, word", [
@@ -78,6 +81,7 @@ def test_recipes_by_name_and_path(tmp_path):
     ('outputs = ["center", "thumbnail"]', "thumbnail"),
     ('format = "jpeg"', "format"),
     ('previews = "yes"', "previews"),
+    ('auto_costly = "no"', "auto_costly"),
     ('refocus = "x:y"', "refocus"),
     ("method = ", "TOML"),
 ])

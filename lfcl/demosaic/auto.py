@@ -92,6 +92,7 @@ class AutoChoice:
     lens_ratio: float | None = None
     seen_content: bool | None = None
     view: str = "both"  # the rule's losses were judged on this view (VIEWS)
+    costly: bool = True  # False: the rule fitted without COSTLY_METHODS (--auto-cheap)
 
     def as_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -109,15 +110,17 @@ def load_rules() -> dict:
     return json.loads(resources.files("lfcl.data").joinpath(RULE_FILE).read_text())
 
 
-def rule_bands(rules: dict, view: str = "both") -> tuple[dict, ...] | None:
-    """The sigma bands of a rule file's contents ``rules`` for ``view``, lowest first; None where it holds none."""
-    bands = rules.get("rules", {}).get(view)
+def rule_bands(rules: dict, view: str = "both", costly: bool = True) -> tuple[dict, ...] | None:
+    """The sigma bands of a rule file's contents ``rules`` for ``view``, lowest first (``costly`` False: of the
+    rule fitted without :data:`COSTLY_METHODS`); None where it holds none."""
+    bands = rules.get("rules" if costly else "cheap_rules", {}).get(view)
     return tuple(sorted(bands, key=lambda b: b["sigma_from"])) if bands else None
 
 
-def load_rule(view: str = "both") -> tuple[dict, ...]:
-    """The shipped sigma bands of the rule for ``view`` (``VIEWS``), lowest first."""
-    bands = rule_bands(load_rules(), check_view(view))
+def load_rule(view: str = "both", costly: bool = True) -> tuple[dict, ...]:
+    """The shipped sigma bands of the rule for ``view`` (``VIEWS``), lowest first (``costly`` False: the rule
+    fitted without :data:`COSTLY_METHODS`)."""
+    bands = rule_bands(load_rules(), check_view(view), costly)
     if not bands:
         raise ValueError(f"lfcl/data/{RULE_FILE} holds no rule for view {view!r}: refit it with "
                          "research/fit_auto.py")
@@ -178,8 +181,7 @@ def is_costly(candidate: str) -> bool:
 
 def _cheap_band(rows: list[dict], lo: float, hi: float, view: str, tie_db: float) -> dict:
     """:func:`_band` among the cheap candidates only (every candidate but :data:`COSTLY_METHODS`)."""
-    cheap_rows = [{**r, "gains": {c: g for c, g in r["gains"].items() if not is_costly(c)}} for r in rows]
-    return _band(cheap_rows, lo, hi, view, tie_db)
+    return _band(without_costly(rows), lo, hi, view, tie_db)
 
 
 def _costly_case(rows: list[dict], lo: float, hi: float, view: str, tie_db: float) -> dict | None:
@@ -255,21 +257,28 @@ def fit_rule(rows: list[dict], view: str, tie_db: float = TIE_DB, margin_db: flo
     return bands
 
 
+def without_costly(rows: list[dict]) -> list[dict]:
+    """``rows`` with the gains of :data:`COSTLY_METHODS` left out."""
+    return [{**r, "gains": {c: g for c, g in r["gains"].items() if not is_costly(c)}} for r in rows]
+
+
 def fit_rules(rows: list[dict], tie_db: float = TIE_DB, margin_db: float = COSTLY_MARGIN_DB) -> dict:
-    """The rule file's contents from research/fit_auto.py's rows: a rule per view, over every training capture.
+    """The rule file's contents from research/fit_auto.py's rows: a rule per view, over every training capture;
+    and a rule per view fitted without the costly methods (``cheap_rules``: ``--auto-cheap``).
 
     One rule for all content: a class of its own for content like the real light fields (cross-lens ratio
     below 2.6: of the training captures only finetexture, two a level) picked admm-uv-xc at strength 2 in
     one band, 1.9 dB below Malvar on the held-out Lytro frame at 12 lux (docs/auto.md), so it went.
     """
     rules = {view: fit_rule(rows, view, tie_db, margin_db) for view in VIEWS}
+    cheap = {view: fit_rule(without_costly(rows), view, tie_db, margin_db) for view in VIEWS}
     return {"criterion": "per sigma band, the candidate of the best worst-case PSNR gain over Malvar on the "
                          f"training captures (lower of centre view and mean image for 'both'); within {tie_db:g} "
                          f"dB of it, the largest median gain; a costly method ({', '.join(COSTLY_METHODS)}) only "
                          f"where its worst-case gain beats the cheap pick's by {margin_db:g} dB, and in the "
                          "darker bands where it is no worse than the cheap pick's",
             "captures": sorted({r["capture"] for r in rows}),
-            "rules": rules}
+            "rules": rules, "cheap_rules": cheap}
 
 
 def parse_candidate(name: str) -> tuple[str, float, str | None]:
@@ -313,8 +322,8 @@ def replacement(choice: AutoChoice, why: str, method: str | None = None, strengt
     method = choice.method if method is None else method
     strength = choice.strength if strength is None else strength
     at = f" at strength {strength:g}" if strength != 1 else ""
-    ran = AutoChoice(method, strength, choice.sigma, f"{choice.reason}; {why}, so {method}{at} from a Malvar start",
-                     "malvar", choice.lens_ratio, choice.seen_content, choice.view)
+    ran = dataclasses.replace(choice, method=method, strength=strength, start="malvar",
+                              reason=f"{choice.reason}; {why}, so {method}{at} from a Malvar start")
     return ran, {"method": choice.method, "strength": choice.strength, "start": choice.start, "why": why}
 
 
@@ -333,10 +342,11 @@ def for_pitch(choice: AutoChoice, pitch) -> tuple[AutoChoice, dict | None]:
 
 
 def choose(sigma: float, rule=None, lens_ratio: float | None = None, view: str = "both",
-           rules: dict | None = None) -> AutoChoice:
+           rules: dict | None = None, costly: bool = True) -> AutoChoice:
     """The method and strength for noise level ``sigma``: from the sigma bands ``rule`` if given, else
     from the rule file's contents ``rules`` (default: the shipped file), its rule for ``view``
-    (``VIEWS``: what its gains were judged on).
+    (``VIEWS``: what its gains were judged on); ``costly`` False: its rule fitted without
+    :data:`COSTLY_METHODS` (``--auto-cheap``: the methods of about admm-uv's time).
 
     ``lens_ratio``: the raw's cross-lens ratio (lfcl/demosaic/lens_ratio.py), recorded; when it lies outside what
     the band's training captures spanned, the reason says that the rule has not seen such content.
@@ -345,9 +355,11 @@ def choose(sigma: float, rule=None, lens_ratio: float | None = None, view: str =
         raise ValueError(f"auto needs a finite noise level >= 0, got {sigma!r}")
     check_view(view)
     if rule is None:
-        rule = rule_bands(load_rules() if rules is None else rules, view)
+        rule = rule_bands(load_rules() if rules is None else rules, view, costly)
         if not rule:
-            raise ValueError(f"the auto rule holds no rule for view {view!r}: refit it with research/fit_auto.py")
+            which = "" if costly else " without the costly methods"
+            raise ValueError(f"the auto rule holds no rule{which} for view {view!r}: refit it with "
+                             "research/fit_auto.py")
     band, where = band_for(sigma, rule)
     method, strength, start = parse_candidate(band["candidate"])
     cheap = band.get("cheap_pick")
@@ -358,7 +370,8 @@ def choose(sigma: float, rule=None, lens_ratio: float | None = None, view: str =
     else:
         why = (f"{band['candidate']} had the best worst-case PSNR gain over Malvar ({VIEW_WORDS[view]}), within "
                f"{band['tie_db']:g} dB, and the largest median gain")
-    reason = (f"sigma {sigma:.3g} {where} {band['sigma_from']:.3g}-{band['sigma_to']:.3g}: on its "
+    reason = (("" if costly else f"without the costly methods ({', '.join(COSTLY_METHODS)}): ") +
+              f"sigma {sigma:.3g} {where} {band['sigma_from']:.3g}-{band['sigma_to']:.3g}: on its "
               f"{band['captures']} training captures {why} ({band['worst_gain_db']:+.2f} dB worst, "
               f"{band['median_gain_db']:+.2f} dB median)")
     seen = None
@@ -368,4 +381,4 @@ def choose(sigma: float, rule=None, lens_ratio: float | None = None, view: str =
         if not seen:
             reason += (f"; the raw's cross-lens ratio {lens_ratio:.2f} lies outside the {trained[0]:.2f}-"
                        f"{trained[1]:.2f} of those captures, so the rule has not seen such content")
-    return AutoChoice(method, strength, float(sigma), reason, start, lens_ratio, seen, view)
+    return AutoChoice(method, strength, float(sigma), reason, start, lens_ratio, seen, view, costly)

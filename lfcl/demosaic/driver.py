@@ -44,9 +44,10 @@ class AutoResolution:
 
 
 def resolve_auto(mosaic: np.ndarray, pattern: str, grid, *, noise: NoiseEstimate | None = None,
-                 view: str = "both", device=None) -> AutoResolution:
+                 view: str = "both", costly: bool = True, device=None) -> AutoResolution:
     """``auto`` on ``mosaic`` (normalised, not flat-fielded) of ``grid``: lfcl.demosaic.auto.choose once, at the
-    sigma the grid's lambda uses, judged on ``view`` (lfcl.demosaic.auto.VIEWS), then made runnable here.
+    sigma the grid's lambda uses, judged on ``view`` (lfcl.demosaic.auto.VIEWS), then made runnable here;
+    ``costly`` False: from the rule fitted without the costly methods (``--auto-cheap``).
 
     Aligned grids: sigma of ``noise`` (None: estimated from the raw), and the raw's cross-lens ratio
     (lfcl/demosaic/lens_ratio.py) is recorded. Resampled grids: ``noise.sigma_at`` the mean level of the measured
@@ -73,7 +74,7 @@ def resolve_auto(mosaic: np.ndarray, pattern: str, grid, *, noise: NoiseEstimate
 
         noise = noise if noise is not None else estimate_grid_noise(mosaic, grid.sampling)
         sigma = noise.sigma_at(measured(grid.sampling, mosaic)[1])
-    choice = auto.choose(sigma, lens_ratio=lens_ratio, view=view)
+    choice = auto.choose(sigma, lens_ratio=lens_ratio, view=view, costly=costly)
     ran, replaced = choice, None
     if choice.method not in grid.methods or (choice.start is not None and choice.start not in grid.starts):
         what = choice.method if choice.method not in grid.methods else f"{choice.method} from a {choice.start} start"
@@ -121,8 +122,8 @@ def _checked_mosaic(mosaic, pattern: str | None, grid) -> np.ndarray:
 def demosaic_grid(mosaic: np.ndarray, pattern: str | None, grid, method: str, *, lam=None, iterations=None,
                   rho=None, strength: float = 1.0, noise: NoiseEstimate | None = None, device=None, callback=None,
                   max_memory: int | None = None, tolerance_db: float | None = None, start: str | None = None,
-                  skip_flat: bool | float | None = None, auto_view: str = "both", safety_net: bool = True,
-                  cg_steps: int | None = None, interpolation_weight: float | None = None) -> DemosaicResult:
+                  skip_flat: bool | float | None = None, auto_view: str = "both", auto_costly: bool = True,
+                  safety_net: bool = True, cg_steps: int | None = None, interpolation_weight: float | None = None) -> DemosaicResult:
     """Demosaic (and denoise) a normalised lenslet raw ``mosaic`` [H, W] on ``grid`` (module docstring).
 
     ``grid``: a :class:`lfcl.grid.model.AlignedGrid` (``mosaic`` holds whole lenses of its pitch, cut at its
@@ -131,7 +132,8 @@ def demosaic_grid(mosaic: np.ndarray, pattern: str | None, grid, method: str, *,
     flat-fielded). ``pattern``: the raw's Bayer pattern (resampled: None takes the sampling model's).
     ``method``: one of ``grid.methods`` (lfcl/demosaic/methods.py says what each does); ``auto`` is resolved
     once by :func:`resolve_auto` and runs its pick at ``strength`` times the picked strength, from the start
-    it names unless ``start`` is given, judged on ``auto_view``.
+    it names unless ``start`` is given, judged on ``auto_view``; ``auto_costly`` False: from the rule fitted
+    without the costly methods (admm-epi; lfcl.demosaic.auto.COSTLY_METHODS).
 
     ``lam``, ``iterations``, ``rho``, ``strength``, ``noise``, ``tolerance_db``, ``max_memory``, ``callback``,
     ``device``: as lfcl.demosaic.methods.solve_aligned and lfcl.demosaic.resampled.solve_resampled take them
@@ -158,7 +160,7 @@ def demosaic_grid(mosaic: np.ndarray, pattern: str | None, grid, method: str, *,
     mosaic = _checked_mosaic(mosaic, pattern, grid)
     auto = None
     if method == "auto":
-        auto = resolve_auto(mosaic, pattern, grid, noise=noise, view=auto_view, device=device)
+        auto = resolve_auto(mosaic, pattern, grid, noise=noise, view=auto_view, costly=auto_costly, device=device)
         method, strength, noise = auto.method, strength * auto.strength, auto.noise
         start = start if start is not None else auto.start
         skip_flat = skip_flat if method in SKIPPABLE else None

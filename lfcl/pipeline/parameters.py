@@ -292,6 +292,12 @@ class DemosaicParameters(_Schema):
         True, kind=bool,
         help="Keep every lens's colour means within the noise of Malvar's (lfcl/demosaic/safety_net.py; "
              "docs/auto.md): never a mean image worse than Malvar's.")
+    auto_costly: bool = param(
+        True, kind=bool, flag="--auto-costly/--auto-cheap", recipe=5,
+        help="With auto: --auto-costly (the default) lets its rule pick admm-epi, several times the others' time, "
+             "where its worst case on the training captures beats theirs by 1 dB; --auto-cheap keeps to the rule "
+             "fitted without it (the methods of about admm-uv's time, never worse than Malvar on the training "
+             "captures either; docs/auto.md). Recorded for auto only.")
     auto_view: str = param(
         "both", cli=False,
         help="With auto, the view its rule is judged on (lfcl.demosaic.auto.VIEWS); `lfcl process` passes "
@@ -326,11 +332,11 @@ class DemosaicParameters(_Schema):
 
     def options(self) -> dict:
         """As ``summary.json`` records them: ``method`` the name and ``start`` (None: the method's) apart, after
-        ``max_memory``; ``auto_view`` for auto only."""
+        ``max_memory``; ``auto_view`` and ``auto_costly`` for auto only."""
         method, start = self.method_and_start
         out: dict = {}
         for key, value in super().options().items():
-            if key == "auto_view" and method != "auto":
+            if key in ("auto_view", "auto_costly") and method != "auto":
                 continue
             out[key] = method if key == "method" else value
             if key == "max_memory":
@@ -343,17 +349,17 @@ class OutputParameters(_Schema):
     """The Outputs stage: what is written, in which format (docs/outputs.md)."""
 
     outputs: tuple = param(
-        DEFAULT_OUTPUTS, recipe=5, help=f"Comma-separated: {', '.join(OUTPUTS)}. Only these are computed.")
+        DEFAULT_OUTPUTS, recipe=6, help=f"Comma-separated: {', '.join(OUTPUTS)}. Only these are computed.")
     refocus: str = param(
-        DEFAULT_REFOCUS, recipe=6, cli_name="refocus_spec", cli_default=None, metavar="START:STOP:STEP|A,B,..",
+        DEFAULT_REFOCUS, recipe=7, cli_name="refocus_spec", cli_default=None, metavar="START:STOP:STEP|A,B,..",
         help=f"Refocus slopes (lenses per view step): a range, stop included when on the grid, or a "
              f"comma list. Implies the refocus output; refocus without it uses {DEFAULT_REFOCUS}.")
     fmt: str = param(
-        "exr", key="format", choices=FORMATS, recipe=7,
+        "exr", key="format", choices=FORMATS, recipe=8,
         help="Images: EXR (float, scene-linear), TIFF (16-bit linear, clipped to [0, 1]) or DNG "
              "(LinearRaw for raw editors, with the raw's colour matrix and white balance; docs/darktable.md).")
     previews: bool = param(
-        True, kind=bool, recipe=8,
+        True, kind=bool, recipe=9,
         help="Also write an 8-bit sRGB PNG of every image (white balance and colour matrix from the raw).")
 
     def _check(self):

@@ -8,6 +8,7 @@ defaults and their checks are the stages' (lfcl/pipeline/parameters.py, the fiel
     strength = 1.0                # > 0, multiplies the default lambda
     lambda = 0.01                 # >= 0; absent: follows the noise level
     iterations = 20               # >= 1; absent: the method's early-stopping rule
+    auto_costly = true            # with auto; false: its rule without the costly methods (--auto-cheap)
     outputs = ["center", "mean", "lightfield"]   # or "center,mean,lightfield"
     refocus = "-1:1:0.25"         # slopes, used with the refocus output
     format = "exr"                # exr, tiff or dng

@@ -267,6 +267,8 @@ class Demosaic:
     aligned grids; on by default).
     ``auto_view``: with ``auto``, the view its rule was judged on (lfcl.demosaic.auto.VIEWS; ``lfcl process``
     passes lfcl.demosaic.auto.view_for_outputs of its outputs).
+    ``auto_costly``: with ``auto``, whether its rule may pick a costly method (admm-epi; on by default); False
+    (``--auto-cheap``): the rule fitted without them, the methods of about admm-uv's time.
     ``device``: an OpenCL device spec or None (``LFCL_DEVICE``, else the first device).
     ``callback(record, x)``: called after every ADMM iteration (progress bars)."""
 
@@ -278,10 +280,12 @@ class Demosaic:
                  max_memory: int | None = DemosaicParameters.max_memory,
                  tolerance_db: float | None = DemosaicParameters.tolerance_db,
                  skip_flat: bool | float | None = DemosaicParameters.skip_flat,
-                 auto_view: str = DemosaicParameters.auto_view, safety_net: bool = DemosaicParameters.safety_net):
+                 auto_view: str = DemosaicParameters.auto_view, auto_costly: bool = DemosaicParameters.auto_costly,
+                 safety_net: bool = DemosaicParameters.safety_net):
         _take(self, _parameters("Demosaic", DemosaicParameters, method=method, lam=lam, iterations=iterations,
                                 strength=strength, max_memory=max_memory, tolerance_db=tolerance_db,
-                                skip_flat=skip_flat, auto_view=auto_view, safety_net=safety_net))
+                                skip_flat=skip_flat, auto_view=auto_view, auto_costly=auto_costly,
+                                safety_net=safety_net))
         self.method, self.start = self.parameters.method_and_start  # METHOD[:START], apart
         self.device, self.callback = device, callback  # where it runs and who watches: not parameters
 
@@ -309,7 +313,7 @@ class Demosaic:
                                iterations=self.iterations, strength=self.strength, noise=noise, device=self.device,
                                callback=self.callback, max_memory=self.max_memory, tolerance_db=self.tolerance_db,
                                start=self.start, skip_flat=self.skip_flat, auto_view=self.auto_view,
-                               safety_net=self.safety_net)
+                               auto_costly=self.auto_costly, safety_net=self.safety_net)
         extra = {"sampling": result.sampling.as_meta()} if result.sampling is not None else {}
         meta = {
             "method": self.method, "parameters": result.parameters, "source": mosaic.source,

@@ -61,7 +61,8 @@ class SectionedCommand(click.Command):
 #: The sections of `lfcl process --help` and `lfcl batch --help` (their options are shared).
 PROCESS_SECTIONS = {
     "Input and lens grid": ("pitch", "calibration", "white", "pattern"),
-    "Method": ("method", "pipeline", "strength", "lam", "iterations", "tolerance_db", "safety_net", "max_memory"),
+    "Method": ("method", "pipeline", "strength", "lam", "iterations", "tolerance_db", "safety_net", "auto_costly",
+               "max_memory"),
     "Outputs": ("out_dir", "outputs", "refocus_spec", "fmt", "previews", "as_json"),
     "Device": ("device",),
 }

@@ -132,6 +132,7 @@ class ProcessSettings:
     start: str | None = None
     skip_flat: bool | float | None = None
     safety_net: bool = defaults(DemosaicParameters)["safety_net"]
+    auto_costly: bool = defaults(DemosaicParameters)["auto_costly"]
 
     def pipeline(self, callback=None):
         """The :class:`lfcl.pipeline.stages.Pipeline` of these settings; ``callback``: per ADMM iteration (progress)."""
@@ -148,7 +149,8 @@ class ProcessSettings:
             Demosaic(method_spec(self.method, self.start), lam=self.lam, iterations=self.iterations,
                      strength=self.strength, device=self.device, callback=callback, max_memory=self.max_memory,
                      tolerance_db=self.tolerance_db, skip_flat=self.skip_flat,
-                     safety_net=self.safety_net, auto_view=view_for_outputs(self.outputs)),  # auto judges its choice on what is written
+                     safety_net=self.safety_net, auto_costly=self.auto_costly,
+                     auto_view=view_for_outputs(self.outputs)),  # auto judges its choice on what is written
             Outputs(list(self.outputs), refocus=self.refocus or DEFAULT_REFOCUS, fmt=self.fmt,
                     previews=self.previews, metadata=extra),
         ])
@@ -222,7 +224,7 @@ def settings_from_options(options: dict, ctx: click.Context | None = None) -> Pr
         strength=float(strength), max_memory=_field_value("max_memory", max_memory),
         device=options["device"], recipe=recipe_meta,
         tolerance_db=None if tolerance_db is None else float(tolerance_db), start=start,
-        skip_flat=skip_flat, safety_net=bool(options.get("safety_net", True)))
+        skip_flat=skip_flat, safety_net=bool(options.get("safety_net", True)), auto_costly=bool(values["auto_costly"]))
     settings.pipeline()  # the stages check the rest (--strength, --lambda, ...), still before any work
     return settings
 
