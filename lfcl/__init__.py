@@ -74,7 +74,8 @@ def lightfield(raw, *, pitch: int | None = None, calibration=None, white=None, p
         An OpenCL device (``lfcl devices``); default ``LFCL_DEVICE`` or the first device.
     **options
         The Demosaic stage's options: ``lam``, ``iterations``, ``strength``, ``tolerance_db``,
-        ``skip_flat``, ``safety_net``, ``max_memory`` (lfcl/pipeline/stages.py).
+        ``skip_flat``, ``safety_net``, ``auto_costly`` (with ``auto``; False: ``--auto-cheap``), ``max_memory``
+        (lfcl/pipeline/stages.py).
 
     Returns
     -------
