@@ -242,8 +242,11 @@ def test_auto_cheap_never_picks_a_costly_method_and_stays_safe():
             assert choice.method not in COSTLY_METHODS and choice.costly is False
             assert choice.reason.startswith("without the costly methods (admm-epi): ")
             assert choose(float(sigma), view=view).costly is True
-    # where the shipped rule runs admm-epi, the cheap rule runs what it would have run without it
+    # where the shipped rule runs admm-epi, the cheap rule runs what it would have run without it, and the
+    # reason names it
     assert choose(0.0015).method == "admm-epi" and choose(0.0015, costly=False).method == "admm-uv-xc"
+    assert "; --auto-cheap runs admm-uv-xc@1 here" in choose(0.0015).reason
+    assert "--auto-cheap" not in choose(0.009).reason  # a cheap pick already
 
 
 def test_auto_cheap_runs_the_cheap_rule_s_pick(rng):

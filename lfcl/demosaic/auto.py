@@ -354,8 +354,11 @@ def choose(sigma: float, rule=None, lens_ratio: float | None = None, view: str =
     if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma >= 0):
         raise ValueError(f"auto needs a finite noise level >= 0, got {sigma!r}")
     check_view(view)
+    cheap_rule = None  # the rule without the costly methods, to name what --auto-cheap would run
     if rule is None:
-        rule = rule_bands(load_rules() if rules is None else rules, view, costly)
+        rules = load_rules() if rules is None else rules
+        rule = rule_bands(rules, view, costly)
+        cheap_rule = rule_bands(rules, view, False) if costly else None
         if not rule:
             which = "" if costly else " without the costly methods"
             raise ValueError(f"the auto rule holds no rule{which} for view {view!r}: refit it with "
@@ -374,6 +377,8 @@ def choose(sigma: float, rule=None, lens_ratio: float | None = None, view: str =
               f"sigma {sigma:.3g} {where} {band['sigma_from']:.3g}-{band['sigma_to']:.3g}: on its "
               f"{band['captures']} training captures {why} ({band['worst_gain_db']:+.2f} dB worst, "
               f"{band['median_gain_db']:+.2f} dB median)")
+    if cheap_rule and is_costly(band["candidate"]):
+        reason += f"; --auto-cheap runs {band_for(sigma, cheap_rule)[0]['candidate']} here"
     seen = None
     trained = band.get("lens_ratio_range")
     if lens_ratio is not None and trained:
