@@ -71,7 +71,7 @@ def lightfield(raw, *, pitch: int | None = None, calibration=None, white=None, p
         ``METHOD[:START]``: one of ``lfcl.demosaic.names.METHODS``, optionally with the ADMM methods' first
         estimate (``lfcl.demosaic.names.STARTS``), as ``admm-uv-xc:guarded``; default ``auto`` (docs/auto.md).
     device : str or int, optional
-        An OpenCL device (``lfcl devices``); default ``LFCL_DEVICE`` or the first device.
+        An OpenCL device (``lfcl devices``); default ``LFCL_DEVICE``, else the first GPU, else the first device.
     **options
         The Demosaic stage's options: ``lam``, ``iterations``, ``strength``, ``tolerance_db``,
         ``skip_flat``, ``safety_net``, ``auto_costly`` (with ``auto``; False: ``--auto-cheap``), ``max_memory``

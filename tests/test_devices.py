@@ -30,7 +30,8 @@ def test_lists_devices():
         assert info.name in result.stdout
         assert f"[{info.index}]" in result.stdout
     marked = [line for line in result.stdout.splitlines() if line.startswith(" * ")]
-    assert len(marked) == 1 and "[0]" in marked[0]  # the first device by default
+    expected = next((i.index for i in infos if "GPU" in i.type), 0)  # the first GPU, else the first device
+    assert len(marked) == 1 and f"[{expected}]" in marked[0]
     assert "compute units" in result.stdout and "max allocation" in result.stdout
     assert result.stderr == ""
 
@@ -44,7 +45,7 @@ def test_json():
     for key in ("index", "platform", "name", "type", "compute_units", "global_mem_mib",
                 "max_alloc_mib", "max_work_group_size", "opencl_version", "selected"):
         assert key in first
-    assert payload["selected"] == 0
+    assert payload["selected"] == next((d["index"] for d in payload["devices"] if "GPU" in d["type"]), 0)
     assert [d["selected"] for d in payload["devices"]].count(True) == 1
     assert payload["error"] is None
 
@@ -97,3 +98,25 @@ def test_no_platform(monkeypatch):
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "pocl-opencl-icd" in lines[0]
     assert result.stdout == ""
+
+
+class _FakeDevice:
+    def __init__(self, name, kind):
+        self.name, self.type = name, kind
+
+
+def test_default_prefers_the_first_gpu(monkeypatch):
+    import pyopencl as cl
+
+    from lfcl import device as device_module
+
+    cpu, gpu, gpu2 = (_FakeDevice("cpu", cl.device_type.CPU), _FakeDevice("gpu", cl.device_type.GPU),
+                      _FakeDevice("gpu2", cl.device_type.GPU | cl.device_type.DEFAULT))
+    for listed, expected in (([cpu, gpu, gpu2], gpu), ([gpu2, cpu], gpu2), ([cpu], cpu),
+                             ([_FakeDevice("acc", cl.device_type.ACCELERATOR), cpu], None)):
+        monkeypatch.setattr(device_module, "_all_devices", lambda listed=listed: listed)
+        assert select_device() is (expected or listed[0])
+    # a named device still wins over the default
+    monkeypatch.setattr(device_module, "_all_devices", lambda: [_FakeDevice("cpu", cl.device_type.CPU), gpu])
+    monkeypatch.setenv("LFCL_DEVICE", "0")
+    assert select_device().name == "cpu"

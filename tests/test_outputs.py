@@ -203,6 +203,12 @@ def test_tiff_and_no_previews(capture, tmp_path):
     np.testing.assert_allclose(read_image(out / "mean.tif"), np.clip(mean_image(lf), 0, 1), atol=1 / 65535 + 1e-7)
     assert "skipped:" in result.output and "previews (--no-previews)" in result.output
     assert "time: decode" in result.output and "demosaic" in result.output
+    # where it ran: the device that `lfcl devices` marks, in the file and the summary
+    from lfcl.device import get_runtime
+
+    ran = get_runtime().device
+    assert h["lfcl"]["device"]["name"] == ran.name.strip() and h["lfcl"]["device"]["platform"] == ran.platform.name.strip()
+    assert f"device: {ran.name.strip()} (" in result.output
 
 
 def test_calibration_from_pitch(capture, tmp_path):

@@ -269,7 +269,7 @@ class Demosaic:
     passes lfcl.demosaic.auto.view_for_outputs of its outputs).
     ``auto_costly``: with ``auto``, whether its rule may pick a costly method (admm-epi; on by default); False
     (``--auto-cheap``): the rule fitted without them, the methods of about admm-uv's time.
-    ``device``: an OpenCL device spec or None (``LFCL_DEVICE``, else the first device).
+    ``device``: an OpenCL device spec or None (``LFCL_DEVICE``, else the first GPU, else the first device).
     ``callback(record, x)``: called after every ADMM iteration (progress bars)."""
 
     name = "demosaic"
@@ -314,8 +314,11 @@ class Demosaic:
                                callback=self.callback, max_memory=self.max_memory, tolerance_db=self.tolerance_db,
                                start=self.start, skip_flat=self.skip_flat, auto_view=self.auto_view,
                                auto_costly=self.auto_costly, safety_net=self.safety_net)
+        from ..device import device_metadata
+
         extra = {"sampling": result.sampling.as_meta()} if result.sampling is not None else {}
         meta = {
+            "device": device_metadata(self.device),  # where it ran: the default is the first GPU, else the first device
             "method": self.method, "parameters": result.parameters, "source": mosaic.source,
             "pattern": mosaic.pattern, "geometry": gridded.metadata["geometry"],
             "iterations": result.iterations, "stop_reason": result.stop_reason,

@@ -1,7 +1,7 @@
 """``lfcl devices``: the OpenCL platforms and devices, with their key limits.
 
 The device that commands would use is marked: the one ``--device`` names, else
-``$LFCL_DEVICE``, else the first. When the selection names no device, the list is
+``$LFCL_DEVICE``, else the first GPU, else the first device. When the selection names no device, the list is
 still printed and the error follows on stderr (exit code 1), so a bad
 ``LFCL_DEVICE`` shows up here before it breaks a long run.
 """
@@ -27,7 +27,7 @@ def _selection(devices, spec):
     elif env.strip():
         source = f"LFCL_DEVICE={env}"
     else:
-        source = "default: first device"
+        source = "default: the first GPU, else the first device"
     try:
         chosen = select_device(spec)
     except DeviceError as exc:

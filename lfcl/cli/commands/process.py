@@ -382,6 +382,8 @@ def summary_text(raw, out_dir, summary: dict) -> str:
         if mixed:
             parts.append(f"{mixed} some colours of each")
         lines.append("safety net: " + "; ".join(parts))
+    if summary.get("device"):
+        lines.append("device: {name} ({type}) on {platform}".format(**summary["device"]))
     secs = summary["seconds"]
     lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in secs.items()))
     per = summary.get("output_seconds", {})
