@@ -93,7 +93,7 @@ def list_devices() -> list[DeviceInfo]:
 def default_device(devices: list[cl.Device]) -> cl.Device:
     """The device used when none is named: the first GPU, else the first device.
 
-    At 500x500 lenses the default `lfcl process` ran its demosaic stage in 2.9 s on an NVIDIA H200 and in 71 s on
+    At 500x500 lenses the default `lfcl process` ran its demosaic stage in 2.9 s on an NVIDIA H200 and in about 70 s on
     2 CPU cores' PoCL (BENCHMARKS.md, "On a GPU"), and the platforms' order is only the ICD loader's: a machine with
     a GPU and a CPU runtime gets the GPU whichever lists first. A GPU smaller than a frame needs does not stop the
     default: admm-epi and the (u, v) methods solve in bands sized to the device's memory.
