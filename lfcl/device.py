@@ -229,6 +229,16 @@ def verbose() -> bool:
 _BUILD_CHATTER = re.compile(r"^\d+ (warning|error)s? generated\.$")
 
 
+def _build_failure(context: cl.Context, what: str, log: str) -> str:
+    """One line for a build the device's compiler refused: the device, the compiler's first error, the way out."""
+    lines = [line.strip() for line in log.splitlines() if line.strip()]
+    first = next((line for line in lines if "error" in line.lower() and "clBuildProgram" not in line),
+                 lines[0] if lines else "no build log")
+    devices = ", ".join(f"{d.name.strip()} on {d.platform.name.strip()}" for d in context.devices)
+    return (f"the OpenCL compiler of {devices} could not build {what} ({first}); choose another device with "
+            "--device or LFCL_DEVICE (`lfcl devices` lists them)")
+
+
 def build_program(context: cl.Context, source: str, options: list[str], what: str) -> cl.Program:
     """Build ``source`` quietly: the build log (warnings) only with ``LFCL_VERBOSE`` (docs/outputs.md, Quiet runs).
 
@@ -238,7 +248,9 @@ def build_program(context: cl.Context, source: str, options: list[str], what: st
     AVX-512, PoCL's clang notes that passing float16/int16 to the helpers of common.cl
     "changes the ABI" (-Wpsabi; PoCL builds with ``-Dinline=``, so they are ordinary
     calls to it): nothing a user can act on. Anything else the compiler prints on stderr
-    is passed on; a failed build raises with its log as before.
+    is passed on. A build the compiler refuses raises :class:`DeviceError` in one line: the device, the
+    compiler's first error, and how to choose another device (the default is the first GPU, which may be one
+    whose OpenCL compiler is incomplete).
     """
     caught_warnings: list = []
     printed: list[str] = []
@@ -253,7 +265,10 @@ def build_program(context: cl.Context, source: str, options: list[str], what: st
         try:
             with warnings.catch_warnings(record=True) as caught_warnings:
                 warnings.simplefilter("always")
-                program = cl.Program(context, source).build(options=options)
+                try:
+                    program = cl.Program(context, source).build(options=options)
+                except cl.RuntimeError as exc:  # the device's compiler refused it: say which device, and the way out
+                    raise DeviceError(_build_failure(context, what, str(exc))) from exc
         finally:
             if saved is not None:
                 os.dup2(saved, 2)

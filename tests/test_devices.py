@@ -120,3 +120,25 @@ def test_default_prefers_the_first_gpu(monkeypatch):
     monkeypatch.setattr(device_module, "_all_devices", lambda: [_FakeDevice("cpu", cl.device_type.CPU), gpu])
     monkeypatch.setenv("LFCL_DEVICE", "0")
     assert select_device().name == "cpu"
+
+
+def test_a_refused_build_is_one_line_naming_the_device(monkeypatch):
+    """A device whose compiler refuses a kernel (the default GPU may have an incomplete one): a DeviceError in one
+    line with the device, the compiler's first error and the way to choose another; nothing is cached."""
+    from lfcl import device as device_module
+    from lfcl.device import Runtime
+
+    real = device_module.kernel_source
+    monkeypatch.setattr(device_module, "kernel_source",
+                        lambda name: "__kernel void broken(__global float *x) { x[0] = undeclared_thing; }"
+                        if name == "malvar" else real(name))
+    runtime = Runtime(select_device())  # a fresh context: nothing built yet
+    with pytest.raises(DeviceError) as caught:
+        runtime.kernel("malvar", "broken")
+    text = str(caught.value)
+    assert "\n" not in text
+    assert runtime.device.name.strip() in text and "kernels/malvar.cl" in text
+    assert "undeclared_thing" in text and "--device or LFCL_DEVICE" in text
+    assert not runtime._programs
+    monkeypatch.setattr(device_module, "kernel_source", real)
+    assert runtime.kernel("malvar", "malvar") is not None  # the real source builds on the same runtime
