@@ -95,13 +95,15 @@ def test_build_warnings_stay_off_stderr(runtime, capfd, monkeypatch):
 
 
 def test_failed_build_still_raises_with_its_log(runtime, capfd):
+    """A refused build raises one line (DeviceError: the device, the first error) with the whole log behind it."""
     import pyopencl as cl
 
-    from lfcl.device import build_program
+    from lfcl.device import DeviceError, build_program
 
     source = f"// {uuid.uuid4()}\n__kernel void k(__global float *x) {{ x[0] = undeclared; }}\n"
-    with pytest.raises(cl.RuntimeError, match="undeclared"):
+    with pytest.raises(DeviceError, match="could not build broken.cl .*undeclared") as caught:
         build_program(runtime.context, source, ["-cl-std=CL1.2"], "broken.cl")
+    assert isinstance(caught.value.__cause__, cl.RuntimeError) and "undeclared" in str(caught.value.__cause__)
     assert "errors generated" not in capfd.readouterr().err
 
 
