@@ -7,8 +7,8 @@ fetched once).
 
 Device choice, in order: an explicit ``spec`` argument (the CLI's ``--device``),
 the ``LFCL_DEVICE`` environment variable, then the first GPU found, then the first device
-(:func:`default_device`). A spec is
-either an index into :func:`list_devices` or a case-insensitive substring of the
+(:func:`default_device`). A spec is an index into :func:`list_devices`, a type (``gpu``,
+``cpu``, ``accelerator``: the first device of it), or a case-insensitive substring of the
 device or platform name.
 """
 
@@ -90,6 +90,10 @@ def list_devices() -> list[DeviceInfo]:
     ]
 
 
+#: Specs that choose a device by its OpenCL type (the first of that type) rather than by name or index.
+DEVICE_KINDS = {"gpu": cl.device_type.GPU, "cpu": cl.device_type.CPU, "accelerator": cl.device_type.ACCELERATOR}
+
+
 def default_device(devices: list[cl.Device]) -> cl.Device:
     """The device used when none is named: the first GPU, else the first device.
 
@@ -116,6 +120,12 @@ def select_device(spec: str | int | None = None) -> cl.Device:
                 f"device index {index} does not exist: {len(devices)} device(s) found (see `lfcl devices`)"
             )
         return devices[index]
+    kind = DEVICE_KINDS.get(spec.lower())
+    if kind is not None:  # `--device cpu` on a machine whose default is its GPU, and the other way round
+        of_kind = [d for d in devices if d.type & kind]
+        if not of_kind:
+            raise DeviceError(f"no OpenCL device of type {spec.upper()} (see `lfcl devices`)")
+        return of_kind[0]
     matches = [
         d for d in devices if spec.lower() in d.name.lower() or spec.lower() in d.platform.name.lower()
     ]

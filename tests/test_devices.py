@@ -142,3 +142,30 @@ def test_a_refused_build_is_one_line_naming_the_device(monkeypatch):
     assert not runtime._programs
     monkeypatch.setattr(device_module, "kernel_source", real)
     assert runtime.kernel("malvar", "malvar") is not None  # the real source builds on the same runtime
+
+
+def test_device_by_type(monkeypatch):
+    """`--device gpu` / `cpu` / `accelerator`: the first device of that type, whatever the names; none is an error."""
+    import pyopencl as cl
+
+    from lfcl import device as device_module
+
+    cpu, gpu, gpu2 = (_FakeDevice("cpu-one", cl.device_type.CPU), _FakeDevice("card", cl.device_type.GPU),
+                      _FakeDevice("card2", cl.device_type.GPU))
+    monkeypatch.setattr(device_module, "_all_devices", lambda: [gpu, cpu, gpu2])
+    assert select_device("gpu") is gpu and select_device("GPU") is gpu and select_device("cpu") is cpu
+    monkeypatch.setenv("LFCL_DEVICE", "cpu")
+    assert select_device() is cpu
+    with pytest.raises(DeviceError, match="no OpenCL device of type ACCELERATOR"):
+        select_device("accelerator")
+
+
+def test_device_by_type_on_this_machine():
+    infos = list_devices()
+    for kind in ("cpu", "gpu"):
+        first = next((i.index for i in infos if kind.upper() in i.type), None)
+        payload = json.loads(run("--json", "--device", kind).stdout)
+        if first is None:
+            assert payload["selected"] is None and f"type {kind.upper()}" in payload["error"]
+        else:
+            assert payload["selected"] == first and payload["error"] is None

@@ -31,7 +31,7 @@ def user_errors(func):
 
 device_option = click.option(
     "--device", "device", default=None, metavar="SPEC",
-    help="OpenCL device: an index from `lfcl devices` or a name substring. Default: $LFCL_DEVICE, else the first GPU, else the first device.",
+    help="OpenCL device: an index from `lfcl devices`, gpu or cpu (the first of that type), or a name substring. Default: $LFCL_DEVICE, else the first GPU, else the first device.",
 )
 
 
