@@ -148,6 +148,30 @@ def test_stage_contracts(capture, tmp_path):
     np.testing.assert_array_equal(np.load(tmp_path / "one" / "lightfield.npy"), demosaiced.lightfield)
 
 
+def test_the_depth_output_runs_on_the_demosaic_stages_device(capture, tmp_path, monkeypatch):
+    # `--device cpu` on a machine whose default is a GPU must keep the depth output's kernels off that GPU too
+    import lfcl.depth.estimate as estimate
+
+    real, seen = estimate.estimate_disparity, []
+
+    def spy(*args, device=None, **kwargs):
+        seen.append(device)
+        return real(*args, device=device, **kwargs)
+
+    monkeypatch.setattr(estimate, "estimate_disparity", spy)
+    mosaic = Decode()(capture)
+    demosaiced = Demosaic("malvar", device="cpu")(Grid(pitch=9)(mosaic))
+    assert demosaiced.device == "cpu"
+    written = Outputs(outputs=["depth"], previews=False)(demosaiced, tmp_path / "d")
+    assert seen == ["cpu"] and "depth.exr" in [p.name for p in written.paths]
+
+    seen.clear()
+    result = CliRunner().invoke(cli, ["process", str(capture), "--method", "malvar", "--device", "cpu", "--outputs",
+                                      "depth", "--no-previews", "-o", str(tmp_path / "e"), "--json"])
+    assert result.exit_code == 0, result.output
+    assert seen == ["cpu"]
+
+
 def test_process_pipeline_preview_and_explicit_options_win(capture, tmp_path):
     out = tmp_path / "p"
     result = CliRunner().invoke(cli, ["process", str(capture), "--recipe", "preview", "-o", str(out), "--json"])

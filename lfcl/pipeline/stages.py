@@ -98,6 +98,7 @@ class Demosaiced(NamedTuple):
     lightfield: np.ndarray  # [S, T, U, V, 3] float32
     metadata: dict  # what every output file records (method, parameters, geometry, input, ...)
     mosaic: Mosaic
+    device: object = None  # the device spec the stage ran on (None: the default); the depth output runs there too
 
 
 class Written(NamedTuple):
@@ -327,7 +328,7 @@ class Demosaic:
             "input": mosaic.metadata(), "generator": f"lfcl {__version__} stages",
             **{k: v for k, v in gridded.metadata.items() if k != "geometry"}, **extra,
         }
-        return Demosaiced(result, result.lightfield, meta, mosaic)
+        return Demosaiced(result, result.lightfield, meta, mosaic, self.device)
 
 
 class Outputs:
@@ -380,7 +381,8 @@ class Outputs:
             from ..depth.output import depth_from_mosaic
 
             start = time.perf_counter()
-            depth = depth_from_mosaic(demosaiced.mosaic, demosaiced.metadata["geometry"])
+            # on the demosaic's device: `--device cpu` must keep every kernel off a GPU whose compiler fails
+            depth = depth_from_mosaic(demosaiced.mosaic, demosaiced.metadata["geometry"], device=demosaiced.device)
             depth_seconds = time.perf_counter() - start
         plan = plan_outputs(demosaiced.lightfield, self.outputs, slopes=self.slopes, fmt=self.fmt,
                             previews=self.previews, metadata=self.file_metadata(demosaiced), colour=colour,
