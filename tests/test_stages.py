@@ -172,6 +172,24 @@ def test_the_depth_output_runs_on_the_demosaic_stages_device(capture, tmp_path, 
     assert seen == ["cpu"]
 
 
+def test_depth_on_a_resampled_grid_is_refused_before_the_demosaic(tmp_path, monkeypatch):
+    from lfcl.sim import write_capture
+    from lfcl.sim.capture import simulate_grid
+
+    out = tmp_path / "hex"
+    write_capture(simulate_grid("charts", "hex", 9.4, 0.7, (0.3, -0.2), lenses=(10, 10), lux=12, seed=0), out)
+    import lfcl.demosaic.driver as driver
+
+    def never(*args, **kwargs):
+        raise AssertionError("the demosaic ran")
+
+    monkeypatch.setattr(driver, "demosaic_grid", never)
+    result = CliRunner().invoke(cli, ["process", str(out / "raw.dng"), "--white", str(out / "white.dng"),
+                                      "--outputs", "center,depth", "-o", str(tmp_path / "o")])
+    assert result.exit_code == 1 and "the depth output needs an aligned square lens grid" in result.output
+    assert not (tmp_path / "o").exists()
+
+
 def test_process_pipeline_preview_and_explicit_options_win(capture, tmp_path):
     out = tmp_path / "p"
     result = CliRunner().invoke(cli, ["process", str(capture), "--recipe", "preview", "-o", str(out), "--json"])

@@ -488,6 +488,10 @@ class Pipeline:
         if "calibrate" in gridded.seconds:  # report the white image's calibration apart
             seconds["calibrate"] = gridded.seconds["calibrate"]
             seconds["grid"] = max(0.0, seconds["grid"] - seconds["calibrate"])
+        if outputs is not None and "depth" in outputs.outputs:  # refused now, not after the demosaic
+            from ..depth.output import check_depth_grid
+
+            check_depth_grid(gridded.metadata["geometry"])
         demosaiced = timed(demosaic, gridded)
         for part, spent in demosaiced.result.part_seconds.items():  # e.g. admm-epi's disparity, reported apart
             seconds[part] = spent
