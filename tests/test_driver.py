@@ -137,3 +137,31 @@ def test_auto_is_resolved_once(monkeypatch, case):
                            strength=resolved.strength, **({"start": resolved.start} if grid.safety_net else {}))
     np.testing.assert_array_equal(result.planes, direct.planes)
     assert result.lightfield.shape[2:] == (*grid.pitch, 3) and result.shape.planes_shape == result.planes.shape
+
+
+def test_a_given_disparity_map_is_checked_and_solved_with(rng, monkeypatch):
+    from lfcl.depth import estimate_disparity
+
+    mosaic = (0.3 + 0.05 * rng.standard_normal((6 * 9, 7 * 9))).astype(np.float32)
+    depth = estimate_disparity(mosaic, "GRBG", 9, noise=NOISE)
+    given = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-epi", noise=NOISE, iterations=2,
+                          disparity=depth)
+    assert given.parameters["disparity"]["source"] == "given (the depth output's estimate)"
+    assert given.parameters["disparity"]["step"] == depth.step and "disparity" not in given.part_seconds
+    # the same map estimated by admm-epi itself (its options made equal to the given one's): the same solve
+    own = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-epi", noise=NOISE, iterations=2)
+    assert own.parameters["disparity"]["source"] == "estimated for admm-epi" and "disparity" in own.part_seconds
+    import lfcl.solvers.epi as epi
+
+    monkeypatch.setitem(epi.EPI_DEPTH_OPTIONS, "step", depth.step)
+    same = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-epi", noise=NOISE, iterations=2)
+    np.testing.assert_array_equal(given.planes, same.planes)
+    small = estimate_disparity(mosaic[:5 * 9], "GRBG", 9, noise=NOISE)
+    with pytest.raises(ValueError, match="the disparity map given has 5x7 lenses, this raw 6x7"):
+        demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-epi", noise=NOISE, iterations=1, disparity=small)
+
+
+def test_a_disparity_map_is_refused_on_a_resampled_grid(tmp_path):
+    gridded = gridded_of(tmp_path, "hex", 9.4)
+    with pytest.raises(ValueError, match="a disparity map is for aligned square lens grids"):
+        demosaic_grid(gridded.data, "GRBG", gridded.grid, "admm-uv", noise=NOISE, disparity=object())

@@ -172,6 +172,37 @@ def test_the_depth_output_runs_on_the_demosaic_stages_device(capture, tmp_path, 
     assert seen == ["cpu"]
 
 
+def test_admm_epi_takes_the_depth_outputs_disparity_instead_of_estimating_its_own(capture, tmp_path, monkeypatch):
+    import lfcl.depth
+    import lfcl.depth.estimate as estimate
+    from lfcl.io.images import read_image
+
+    real, steps = estimate.estimate_disparity, []
+
+    def spy(*args, **kwargs):
+        steps.append(kwargs.get("step", estimate.DEFAULTS["step"]))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(estimate, "estimate_disparity", spy)  # the depth output's import
+    monkeypatch.setattr(lfcl.depth, "estimate_disparity", spy)  # admm-epi's
+    runs = {}
+    for name, outputs in (("alone", "center"), ("with_depth", "center,depth")):
+        steps.clear()
+        result = CliRunner().invoke(cli, ["process", str(capture), "--method", "admm-epi", "--outputs", outputs,
+                                          "--no-previews", "-o", str(tmp_path / name), "--json"])
+        assert result.exit_code == 0, result.output
+        runs[name] = (json.loads(result.output), list(steps))
+    alone, with_depth = runs["alone"], runs["with_depth"]
+    assert len(alone[1]) == 1 and alone[1][0] != estimate.DEFAULTS["step"]  # admm-epi's own, coarser candidates
+    assert with_depth[1] == [estimate.DEFAULTS["step"]]  # one estimate in the run: the depth output's
+    assert alone[0]["parameters"]["disparity"]["source"] == "estimated for admm-epi"
+    used = with_depth[0]["parameters"]["disparity"]
+    assert used["source"] == "given (the depth output's estimate)" and used["step"] == estimate.DEFAULTS["step"]
+    written = read_image(tmp_path / "with_depth" / "depth.exr")[..., 0]
+    assert float(written.min()) == used["min"] and float(written.max()) == used["max"]  # the map the solve used
+    assert "disparity" in alone[0]["seconds"] and "disparity" not in with_depth[0]["seconds"]
+
+
 def test_depth_on_a_resampled_grid_is_refused_before_the_demosaic(tmp_path, monkeypatch):
     from lfcl.sim import write_capture
     from lfcl.sim.capture import simulate_grid

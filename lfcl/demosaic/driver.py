@@ -123,7 +123,8 @@ def demosaic_grid(mosaic: np.ndarray, pattern: str | None, grid, method: str, *,
                   rho=None, strength: float = 1.0, noise: NoiseEstimate | None = None, device=None, callback=None,
                   max_memory: int | None = None, tolerance_db: float | None = None, start: str | None = None,
                   skip_flat: bool | float | None = None, auto_view: str = "both", auto_costly: bool = True,
-                  safety_net: bool = True, cg_steps: int | None = None, interpolation_weight: float | None = None) -> DemosaicResult:
+                  safety_net: bool = True, cg_steps: int | None = None, interpolation_weight: float | None = None,
+                  disparity=None) -> DemosaicResult:
     """Demosaic (and denoise) a normalised lenslet raw ``mosaic`` [H, W] on ``grid`` (module docstring).
 
     ``grid``: a :class:`lfcl.grid.model.AlignedGrid` (``mosaic`` holds whole lenses of its pitch, cut at its
@@ -141,7 +142,9 @@ def demosaic_grid(mosaic: np.ndarray, pattern: str | None, grid, method: str, *,
     ``grid.starts``) and ``skip_flat``: aligned grids (solve_aligned). ``safety_net`` (on by default): each lens's
     colour means are soft-thresholded towards Malvar's at the noise of a lens mean (lfcl/demosaic/safety_net.py),
     recorded in ``parameters["safety_net"]``; on grids with ``grid.safety_net`` only (aligned), for every method
-    but Malvar. ``cg_steps``, ``interpolation_weight``: resampled grids (solve_resampled).
+    but Malvar. ``cg_steps``, ``interpolation_weight``: resampled grids (solve_resampled). ``disparity``: aligned grids,
+    an ``lfcl.depth.DisparityMap`` already estimated from this mosaic (the depth output's), which admm-epi takes
+    instead of estimating its own (solve_aligned).
 
     Returns a :class:`lfcl.demosaic.methods.DemosaicResult`: ``planes`` [3, S*U, T*V], ``lightfield``
     [S, T, U, V, 3] float32, ``parameters`` (with ``auto``: ``parameters["auto"]``), ``sampling`` (resampled).
@@ -155,6 +158,8 @@ def demosaic_grid(mosaic: np.ndarray, pattern: str | None, grid, method: str, *,
     if aligned and (cg_steps is not None or interpolation_weight is not None):
         raise ValueError("cg_steps and interpolation_weight are for resampled lens grids (the aligned admm-uv "
                          "solves its x-update exactly)")
+    if disparity is not None and not aligned:
+        raise ValueError("a disparity map is for aligned square lens grids (the depth output needs one)")
     if tolerance_db is not None:
         change_for_tolerance_db(tolerance_db)  # a bad tolerance: one line now, before any work
     mosaic = _checked_mosaic(mosaic, pattern, grid)
@@ -168,7 +173,7 @@ def demosaic_grid(mosaic: np.ndarray, pattern: str | None, grid, method: str, *,
         result = solve_aligned(mosaic, pattern, grid.pitch, method, origin=grid.origin, lam=lam,
                                iterations=iterations, rho=rho, strength=strength, noise=noise, device=device,
                                callback=callback, max_memory=max_memory, lens_response=grid.lens_response,
-                               tolerance_db=tolerance_db, start=start, skip_flat=skip_flat)
+                               tolerance_db=tolerance_db, start=start, skip_flat=skip_flat, disparity=disparity)
         result.shape = LightFieldShape(mosaic.shape[0] // grid.pitch[0], mosaic.shape[1] // grid.pitch[1],
                                        *grid.pitch)
     else:

@@ -261,7 +261,7 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
                   lam=None, iterations=None, rho=None, strength=1.0, noise: NoiseEstimate | None = None,
                   device=None, callback=None, max_memory: int | None = None,
                   lens_response=None, tolerance_db: float | None = None,
-                  start: str | None = None, skip_flat: bool | float | None = None) -> DemosaicResult:
+                  start: str | None = None, skip_flat: bool | float | None = None, disparity=None) -> DemosaicResult:
     """Demosaic (and denoise) a normalised lenslet mosaic [H, W] of an aligned grid into [3, H, W] planes.
 
     Called by lfcl.demosaic.driver.demosaic_grid, which has checked the input (H and W whole
@@ -289,6 +289,8 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
     packed into a smaller mosaic; None or False: off (the default: the test took fine texture
     for noise, docs/auto.md), True: on at p threshold FLAT_P, a number: that p threshold.
     Recorded in ``parameters["flat_lenses"]``; ``callback``'s x is then the packed mosaic's.
+    ``disparity``: an ``lfcl.depth.DisparityMap`` already estimated from this mosaic (the depth output's); admm-epi
+    takes it instead of estimating its own (lfcl/solvers/epi.py demosaic_epi), the other methods ignore it.
     """
     mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
     U, V = pitch
@@ -374,14 +376,16 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
         else:
             lam_fb = params.lam * defaults.fb_per_sigma / defaults.lam_per_sigma
         planes, extra, run, depth_seconds = demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params,
-                                                         lam_fb, noise, device, lens_weights, callback, max_memory)
+                                                         lam_fb, noise, device, lens_weights, callback, max_memory,
+                                                         depth=disparity)
         parameters = {**dataclasses.asdict(params), "start": start, **extra}
         if epi_start_replaced is not None:
             parameters["start_replaced"] = epi_start_replaced
         if guard is not None:
             parameters["start_guard"] = guard
         return DemosaicResult(planes, method, parameters, run.iterations, time.perf_counter() - began,
-                              run.stop_reason, run.history_rows(), noise, part_seconds={"disparity": depth_seconds})
+                              run.stop_reason, run.history_rows(), noise,
+                              part_seconds={} if disparity is not None else {"disparity": depth_seconds})
     budget = int(max_memory) if max_memory is not None else int(0.8 * runtime.device.global_mem_size)
     needed = solver_bytes((H, W), dims, exact=dims == "uv", cross_channel=params.cross_channel)
     largest = solver_largest_buffer((H, W), dims)

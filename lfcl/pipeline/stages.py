@@ -293,7 +293,9 @@ class Demosaic:
     def options(self) -> dict:
         return self.parameters.options()
 
-    def __call__(self, gridded: Gridded) -> Demosaiced:
+    def __call__(self, gridded: Gridded, disparity=None) -> Demosaiced:
+        """``disparity``: an ``lfcl.depth.DisparityMap`` already estimated from this raw (the depth output's,
+        :func:`depth_of`); admm-epi takes it instead of estimating its own."""
         _need(gridded, Gridded, "Demosaic", "a Gridded (from Grid)")
         try:
             grid = gridded.grid
@@ -314,7 +316,7 @@ class Demosaic:
                                iterations=self.iterations, strength=self.strength, noise=noise, device=self.device,
                                callback=self.callback, max_memory=self.max_memory, tolerance_db=self.tolerance_db,
                                start=self.start, skip_flat=self.skip_flat, auto_view=self.auto_view,
-                               auto_costly=self.auto_costly, safety_net=self.safety_net)
+                               auto_costly=self.auto_costly, safety_net=self.safety_net, disparity=disparity)
         from ..device import device_metadata
 
         extra = {"sampling": result.sampling.as_meta()} if result.sampling is not None else {}
@@ -329,6 +331,18 @@ class Demosaic:
             **{k: v for k, v in gridded.metadata.items() if k != "geometry"}, **extra,
         }
         return Demosaiced(result, result.lightfield, meta, mosaic, self.device)
+
+
+def depth_of(mosaic: Mosaic, geometry: dict, device=None):
+    """The depth output's disparity map of a decoded raw on the Grid stage's ``geometry``, and its seconds:
+    ``(lfcl.depth.DisparityMap, seconds)``. From the raw itself, not from the demosaiced light field (docs/depth.md),
+    on ``device`` (the demosaic's: ``--device cpu`` must keep every kernel off a GPU whose compiler fails). A grid
+    other than an aligned square one is a ``ValueError``."""
+    from ..depth.output import depth_from_mosaic
+
+    start = time.perf_counter()
+    depth = depth_from_mosaic(mosaic, geometry, device=device)
+    return depth, time.perf_counter() - start
 
 
 class Outputs:
@@ -356,10 +370,12 @@ class Outputs:
         """What every output file records: the Demosaic stage's metadata and this stage's ``metadata``."""
         return {**demosaiced.metadata, **self.metadata}
 
-    def plan(self, demosaiced: Demosaiced):
+    def plan(self, demosaiced: Demosaiced, depth=None):
         """Compute every output asked for, in memory: an ``lfcl.outputs.files.OutputPlan`` (nothing written).
 
-        ``plan.seconds["previews-setup"]`` includes building the colour pipeline.
+        ``plan.seconds["previews-setup"]`` includes building the colour pipeline. ``depth``: the depth output's
+        disparity map and its seconds, ``(DisparityMap, seconds)``, when already estimated (:func:`depth_of`;
+        None: estimated here, on the demosaic's device).
         """
         _need(demosaiced, Demosaiced, "Outputs", "a Demosaiced (from Demosaic)")
         from ..outputs.files import plan_outputs
@@ -376,14 +392,9 @@ class Outputs:
             from ..io.linear_dng import DngCamera
 
             camera = DngCamera.from_mosaic(demosaiced.mosaic)
-        depth, depth_seconds = None, 0.0
-        if "depth" in self.outputs:  # from the raw itself, not from the demosaiced light field (docs/depth.md)
-            from ..depth.output import depth_from_mosaic
-
-            start = time.perf_counter()
-            # on the demosaic's device: `--device cpu` must keep every kernel off a GPU whose compiler fails
-            depth = depth_from_mosaic(demosaiced.mosaic, demosaiced.metadata["geometry"], device=demosaiced.device)
-            depth_seconds = time.perf_counter() - start
+        depth, depth_seconds = depth if depth is not None else (None, 0.0)
+        if "depth" in self.outputs and depth is None:
+            depth, depth_seconds = depth_of(demosaiced.mosaic, demosaiced.metadata["geometry"], demosaiced.device)
         plan = plan_outputs(demosaiced.lightfield, self.outputs, slopes=self.slopes, fmt=self.fmt,
                             previews=self.previews, metadata=self.file_metadata(demosaiced), colour=colour,
                             camera=camera, depth=depth)
@@ -446,7 +457,9 @@ class Pipeline:
     input, ...), ``lenses``, ``options`` (every stage's options, defaults included),
     ``seconds`` (per stage: ``decode``, ``grid``, ``demosaic``, ``outputs``, and
     ``calibrate`` when the grid came from a white image; ``grid`` is then the rest of that
-    stage; likewise ``disparity`` apart from ``demosaic`` for admm-epi), and with an Outputs stage ``format``, ``previews``, ``colour``, ``outputs``,
+    stage; likewise ``disparity`` apart from ``demosaic`` for admm-epi, unless it took the depth output's, which is
+    estimated once, before the demosaic, and counts in ``outputs``), and with an Outputs stage ``format``,
+    ``previews``, ``colour``, ``outputs``,
     ``refocus``, ``skipped`` (with ``auto``: also the candidates it skipped, lfcl/demosaic/auto_report.py),
     ``output_seconds``. With an Outputs stage the summary is also
     written as ``summary.json``, last, with the other files: all of them or none.
@@ -488,11 +501,14 @@ class Pipeline:
         if "calibrate" in gridded.seconds:  # report the white image's calibration apart
             seconds["calibrate"] = gridded.seconds["calibrate"]
             seconds["grid"] = max(0.0, seconds["grid"] - seconds["calibrate"])
-        if outputs is not None and "depth" in outputs.outputs:  # refused now, not after the demosaic
-            from ..depth.output import check_depth_grid
-
-            check_depth_grid(gridded.metadata["geometry"])
-        demosaiced = timed(demosaic, gridded)
+        depth = None
+        if outputs is not None and "depth" in outputs.outputs:
+            # before the demosaic: a grid it cannot run on is refused before the long part, and admm-epi takes this
+            # estimate instead of one of its own (one disparity per run; its seconds count in the outputs')
+            depth = depth_of(mosaic, gridded.metadata["geometry"], demosaic.device)
+        start = time.perf_counter()
+        demosaiced = demosaic(gridded, disparity=None if depth is None else depth[0])
+        seconds[demosaic.name] = time.perf_counter() - start
         for part, spent in demosaiced.result.part_seconds.items():  # e.g. admm-epi's disparity, reported apart
             seconds[part] = spent
             seconds["demosaic"] = max(0.0, seconds["demosaic"] - spent)
@@ -513,8 +529,8 @@ class Pipeline:
         from ..outputs.files import PlannedFile
 
         start = time.perf_counter()
-        plan = outputs.plan(demosaiced)
-        compute = time.perf_counter() - start
+        plan = outputs.plan(demosaiced, depth=depth)
+        compute = time.perf_counter() - start + (depth[1] if depth is not None else 0.0)
         summary.update({"format": plan.image_format, "previews": plan.previews, "colour": plan.colour,
                         "outputs": [f.name for f in plan.files], "refocus": plan.refocus,
                         "skipped": _skipped(plan, outputs.outputs)

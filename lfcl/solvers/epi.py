@@ -632,9 +632,12 @@ def epi_block_jacobi_np(blocks, r) -> np.ndarray:
 
 def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: AdmmParams, lam_fb: float, noise,
                  device=None, lens_weights=None, callback=None, max_memory: int | None = None,
-                 depth_options: dict | None = None) -> tuple[np.ndarray, dict, AdmmResult, float]:
+                 depth_options: dict | None = None, depth=None) -> tuple[np.ndarray, dict, AdmmResult, float]:
     """``admm-epi`` of lfcl.demosaic.methods.solve_aligned: estimate the disparity from the raw
     (lfcl.depth.estimate_disparity), then solve from the start ``x0`` (device arrays ``b``, ``x0``).
+    ``depth``: a disparity map already estimated from this raw (an ``lfcl.depth.DisparityMap`` of its lenses: the
+    depth output's, whose finer candidates change the solve by hundredths of a dB, docs/admm.md) instead of one with
+    :func:`epi_depth_options`; its seconds are then 0 here.
 
     A sensor whose solver does not fit ``max_memory`` (default :func:`epi_default_budget`) is solved in bands of
     lens rows, each with the halo of lens rows its prior reaches (:func:`epi_halo`), each stopped by its own
@@ -650,10 +653,17 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
 
     H, W = b.shape
     began = time.perf_counter()
-    depth = estimate_disparity(raw_mosaic, pattern, pitch, origin=origin, noise=noise, device=device,
-                               **(epi_depth_options(None if noise is None else noise.sigma) if depth_options is None
-                                  else depth_options))
-    depth_seconds = time.perf_counter() - began
+    shared = depth is not None
+    if shared:
+        lenses = (H // int(pitch[0]), W // int(pitch[1]))
+        if tuple(depth.disparity.shape) != lenses:
+            raise ValueError(f"the disparity map given has {depth.disparity.shape[0]}x{depth.disparity.shape[1]} "
+                             f"lenses, this raw {lenses[0]}x{lenses[1]}")
+    else:
+        depth = estimate_disparity(raw_mosaic, pattern, pitch, origin=origin, noise=noise, device=device,
+                                   **(epi_depth_options(None if noise is None else noise.sigma)
+                                      if depth_options is None else depth_options))
+    depth_seconds = 0.0 if shared else time.perf_counter() - began
     # The confidence splits the prior between the epipolar lines and the fall-back: without a fall-back every ray
     # keeps its full weight (a low-confidence lens would otherwise be left with almost no prior).
     prior = EpiPrior(depth.disparity, depth.confidence if lam_fb > 0 else None, lam_fb=float(lam_fb))
@@ -685,6 +695,7 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
             "search_range": [-depth.dmax, depth.dmax], "step": depth.step,
             "options": dict(depth.options),  # every option of the estimate, its defaults included
             "lookup": "d and confidence read at the lens the ray sees in the centre view",
+            "source": "given (the depth output's estimate)" if shared else "estimated for admm-epi",
         },
     }
     if len(bands) > 1:
