@@ -78,14 +78,6 @@ def write_depth(out_dir, depth, metadata: dict | None = None) -> list[Path]:
     return [write_image(out_dir / name, image, meta) for name, image, meta in depth_files(depth, metadata)]
 
 
-def check_depth_grid(geometry: dict):
-    """A ``ValueError`` unless the Grid stage's ``geometry`` is one the depth output runs on (an aligned square grid);
-    the pipeline asks before the demosaic, so that a run that cannot write its depth stops before the long part."""
-    if geometry.get("grid") != "aligned-square":
-        raise ValueError(f"the depth output needs an aligned square lens grid; this one is {geometry.get('grid')!r} "
-                         "(rotated, non-integer-pitch and hexagonal grids are not supported yet)")
-
-
 def depth_from_mosaic(mosaic, geometry: dict, device=None, **options):
     """The disparity map of a decoded raw (:class:`lfcl.io.raw.Mosaic`) on the pipeline's lens grid.
 
@@ -93,7 +85,9 @@ def depth_from_mosaic(mosaic, geometry: dict, device=None, **options):
     ``lenses``, ``first_lens_pixel``); other grids are refused (``ValueError``). The noise model is
     the raw's NoiseProfile where it has one, else estimated from the raw.
     """
-    check_depth_grid(geometry)
+    if geometry.get("grid") != "aligned-square":
+        raise ValueError(f"the depth output needs an aligned square lens grid; this one is {geometry.get('grid')!r} "
+                         "(rotated, non-integer-pitch and hexagonal grids are not supported yet)")
     from ..noise.model import from_noise_profile
     from .estimate import estimate_disparity
 
