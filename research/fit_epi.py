@@ -497,7 +497,8 @@ def compare_settings(args, name: str, values, apply):
     """admm-epi as ``lfcl process`` runs it under two (or more) values of one setting, ``apply(value)`` putting each in
     place, on every capture of ``args`` (:func:`captures_against_malvar`): per capture and in sum, the centre-view and
     mean-image gains over Malvar, the largest value written (in units of the truth's largest), the iterations and
-    seconds (the disparity's apart), and the gains' differences from the first value."""
+    seconds (the disparity's apart), and the gains' differences from the first value. Returns, per value, a tuple per
+    capture: (centre gain, mean-image gain, largest value, seconds, disparity seconds, iterations, CG steps)."""
     rows = {value: [] for value in values}
     for scene, seed, lux, cap, noise, malvar in captures_against_malvar(args):
         for value in values:
@@ -506,7 +507,8 @@ def compare_settings(args, name: str, values, apply):
             got = scores(result.planes, cap.truth)
             peak = float(np.abs(result.planes).max()) / float(cap.truth.max())
             rows[value].append((got["psnr_center"] - malvar["psnr_center"], got["psnr_mean"] - malvar["psnr_mean"],
-                                peak, result.seconds, result.part_seconds["disparity"]))
+                                peak, result.seconds, result.part_seconds["disparity"], result.iterations,
+                                result.parameters["cg_steps"]))
             print(f"{scene} seed {seed} {lux:g} lux {name} {value:g}: centre {rows[value][-1][0]:+.3f}, mean image "
                   f"{rows[value][-1][1]:+.3f} dB, largest value {peak:.2f}x the truth's, {result.iterations} "
                   f"iterations, {result.seconds:.2f} s", flush=True)

@@ -256,8 +256,63 @@ def test_solver_matches_the_float64_reference(runtime, rng, pattern, lam_fb):
     assert_matches_the_reference(got, expected, iterations=8)
 
 
-@pytest.mark.parametrize("lam_xc, lam_fb, iterations", [(0.0, 0.0, 6), (0.015, 0.02, 6), (0.015, 0.0, 47)])
-def test_carried_right_hand_side_and_residual_are_the_ones_they_stand_for(runtime, rng, lam_xc, lam_fb, iterations):
+@pytest.mark.parametrize("lam_xc, lam_fb", [(0.0, 0.0), (0.015, 0.02)])
+def test_extrapolated_warm_start_matches_the_float64_reference(runtime, rng, lam_xc, lam_fb):
+    """CG from x_k + beta (x_k - x_{k-1}) with its residual carried (epi_extrapolate), over more iterations than
+    EPI_REFRESH, against the reference's CG from that point with its residual computed; and it is not the run
+    without it."""
+    from lfcl.solvers.epi import EPI_REFRESH, EpiAdmmSolver, EpiPrior, admm_epi_reference
+    from lfcl.solvers.params import AdmmParams
+
+    S, T, U, V = 5, 4, 9, 9
+    b, x0, _ = plane_scene_mosaic(rng, S, T, U, V)
+    disparity, confidence = maps(rng, S, T, spread=1.0)
+    prior = EpiPrior(disparity, confidence, lam_fb=lam_fb)
+    iterations = EPI_REFRESH + 4
+    params = AdmmParams(lam=0.01, lam_xc=lam_xc, rho=0.5, max_iter=iterations, cg_steps=3, cg_tol=0.0,
+                        extrapolation=0.8)
+    expected = admm_epi_reference(b, "GRBG", (U, V), params, x0, prior)
+    solver = EpiAdmmSolver(runtime, b.shape, "GRBG", (U, V))
+    got = solver.solve(runtime.to_device(b), runtime.to_device(x0), params, prior)
+    assert_matches_the_reference(got, expected, iterations=iterations)
+    plain = admm_epi_reference(b, "GRBG", (U, V), dataclasses.replace(params, extrapolation=0.0), x0, prior)
+    assert np.linalg.norm(plain.x - expected.x) > 1e-3 * np.linalg.norm(expected.x)
+
+
+def test_extrapolation_kernel_matches_its_twin(runtime, rng):
+    from lfcl.solvers.epi import EpiAdmmSolver, epi_extrapolate_np
+
+    solver = EpiAdmmSolver(runtime, (9, 15), "GRBG", (3, 3))  # 405 floats: the last chunk partly past the end
+    x, x_prev, r, dnx = (rng.standard_normal((3, 9, 15)).astype(np.float32) for _ in range(4))
+    arrays = [runtime.to_device(v) for v in (x, x_prev, r, dnx)]
+    runtime.launch("epi", "epi_extrapolate", (64,), *(a.data for a in arrays), np.float32(0.8), np.uint64(x.size),
+                   np.uint64(-(-x.size // 16)), defines=solver._defines)
+    for got, want in zip(arrays, epi_extrapolate_np(x, x_prev, r, dnx, 0.8)):
+        np.testing.assert_allclose(got.get(), want, rtol=1e-6, atol=1e-6)
+
+
+def test_other_solvers_refuse_the_extrapolated_warm_start(runtime):
+    import scipy.sparse
+
+    from lfcl.solvers.admm import AdmmSolver
+    from lfcl.solvers.params import AdmmParams
+    from lfcl.solvers.resampled import ResampledAdmmSolver
+
+    params = AdmmParams(extrapolation=0.5)
+    with pytest.raises(ValueError, match="admm-epi's"):
+        AdmmSolver(runtime, (18, 18), "GRBG", (9, 9), "uv").prepare(params)
+    solver = ResampledAdmmSolver(runtime, scipy.sparse.eye(10, 3 * 16, format="csr"), (2, 2, 2, 2), "uv")
+    ones = runtime.to_device(np.ones(10, np.float32))
+    with pytest.raises(ValueError, match="admm-epi's"):
+        solver.solve(ones, ones, runtime.to_device(np.zeros((3, 4, 4), np.float32)), params)
+    with pytest.raises(ValueError, match="extrapolation must be a number in"):
+        AdmmParams(extrapolation=1.5)
+
+
+@pytest.mark.parametrize("lam_xc, lam_fb, iterations, beta", [(0.0, 0.0, 6, 0.0), (0.015, 0.02, 6, 0.0),
+                                                              (0.015, 0.0, 47, 0.0), (0.015, 0.02, 23, 0.8)])
+def test_carried_right_hand_side_and_residual_are_the_ones_they_stand_for(runtime, rng, lam_xc, lam_fb, iterations,
+                                                                           beta):
     """iterate carries rhs = A^T W b + rho K^T (z - u) and CG's first residual r = rhs - N x from one iteration
     to the next (epi_carry_rhs) instead of recomputing them, and recomputes them every EPI_REFRESH iterations: after
     a run (short, or long enough to pass several refreshes) both must equal their definitions, computed in float64
@@ -269,7 +324,8 @@ def test_carried_right_hand_side_and_residual_are_the_ones_they_stand_for(runtim
     S, T, U, V = 5, 4, 9, 9
     b, x0, _ = plane_scene_mosaic(rng, S, T, U, V)
     disparity, confidence = maps(rng, S, T, spread=1.0)
-    params = AdmmParams(lam=0.01, lam_xc=lam_xc, rho=0.7, max_iter=iterations, cg_steps=3, cg_tol=0.0)
+    params = AdmmParams(lam=0.01, lam_xc=lam_xc, rho=0.7, max_iter=iterations, cg_steps=3, cg_tol=0.0,
+                        extrapolation=beta)
     weights = np.ones((U, V))
     weights[4, 4] = 0.5
     solver = EpiAdmmSolver(runtime, b.shape, "GRBG", (U, V))
@@ -298,6 +354,13 @@ def test_carried_right_hand_side_and_residual_are_the_ones_they_stand_for(runtim
     scale = np.linalg.norm(rhs)
     assert np.linalg.norm(solver._rhs.get() - rhs) <= 1e-5 * scale
     assert np.linalg.norm(solver._cg[0].get() - (rhs - normal_x)) <= 1e-5 * scale
+    if beta:  # and the change of N x over the last x-update, which the next extrapolation takes off the residual
+        x_prev = solver._x_prev.get().astype(np.float64)
+        normal_prev = cfa_adjoint_np(w * cfa_sample_np(x_prev, "GRBG"), "GRBG") + params.rho * sum(
+            adjoint(op, forward(op, x_prev)) for op, _ in solver.blocks) + delta * x_prev
+        change = normal_x - normal_prev
+        # to the carried residuals' float32 round-off: measured 1.2e-4 of the change
+        assert np.linalg.norm(solver._dnx.get() - change) <= 1e-3 * np.linalg.norm(change)
 
 
 def test_reference_solves_the_problem_it_states(rng):
@@ -781,6 +844,20 @@ def test_cross_block_leaves_no_trace_on_a_later_solve_without_it(runtime, rng):
     assert again.history == fresh.history
     both = solver.solve(b_dev, x0_dev, with_xc, EpiPrior(disparity, confidence, lam_fb=0.02))
     assert len(solver.blocks) == 3 and np.all(np.isfinite(both.x.get()))
+
+
+def test_epi_params_take_the_x_update_of_the_nearer_row(monkeypatch):
+    import lfcl.solvers.epi as epi
+    from lfcl.solvers.params import AdmmParams
+
+    rows = (epi.EpiSetting(sigma=1e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.05, iterations=20,
+                           start="guarded", cg_steps=5, extrapolation=0.0),
+            epi.EpiSetting(sigma=4e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.05, iterations=20,
+                           start="guarded", cg_steps=3, extrapolation=0.8))
+    monkeypatch.setattr(epi, "EPI_SCHEDULE", rows)
+    for sigma, steps, beta in ((5e-4, 5, 0.0), (1.9e-3, 5, 0.0), (2.1e-3, 3, 0.8), (9e-3, 3, 0.8)):
+        params, _ = epi.epi_params(AdmmParams(cg_steps=4), sigma)
+        assert (params.cg_steps, params.extrapolation) == (steps, beta), sigma
 
 
 def test_epi_params_sets_lam_xc_from_the_schedule(monkeypatch):

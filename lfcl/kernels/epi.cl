@@ -442,6 +442,24 @@ __kernel void epi_zu(__global float *kx, __global float *z, __global float *u, _
           + ((a.s8 + a.s9) + (a.sa + a.sb)) + ((a.sc + a.sd) + (a.se + a.sf));
 }
 
+// CG's warm start extrapolated along the last x-update, in place, chunks of 16 floats (twin: lfcl/solvers/epi.py
+// epi_extrapolate_np). On entry x = x_k, x_prev = x_{k-1}, r = rhs - N x_k (carried), dnx = N x_k - N x_{k-1}; after:
+//   x_prev = x_k (the x-update's anchor), x = x_k + beta (x_k - x_{k-1}), r = r - beta dnx = rhs - N x,
+//   dnx = beta dnx + r,
+// so that once CG has brought r to its final rhs - N x_{k+1}, dnx - r is N x_{k+1} - N x_k (EpiAdmmSolver.iterate).
+__kernel void epi_extrapolate(__global float *x, __global float *x_prev, __global float *r, __global float *dnx,
+                              const float beta, const ulong n, const ulong chunks)
+{
+    const ulong k = get_global_id(0);
+    if (k >= chunks) return;
+    const float16 xk = load_chunk(x, k, n), older = load_chunk(x_prev, k, n), d = load_chunk(dnx, k, n);
+    const float16 rn = load_chunk(r, k, n) - beta * d;
+    store_chunk(xk, x_prev, k, n);
+    store_chunk(xk + beta * (xk - older), x, k, n);
+    store_chunk(rn, r, k, n);
+    store_chunk(beta * d + rn, dnx, k, n);
+}
+
 // The rays' maps from the lens maps (twin: lfcl/ops/epi.py ray_maps_np): sample (s, t, u, v) reads the disparity and
 // the confidence at the lens its ray sees in the centre view, round(s + d0 (u - uc)), round(t + d0 (v - vc)) (d0
 // its own lens's disparity), clamped to the frame, in float32 without contraction as the twin computes it.

@@ -376,6 +376,8 @@ class AdmmSolver:
     def prepare(self, params: AdmmParams, lens_weights=None) -> bool:
         """Set the lens weights (and with them the prior's mask) and the prior's blocks for ``params``
         (before :meth:`start` or :meth:`iterate`); returns whether the x-update is the exact lens solve."""
+        if params.extrapolation:
+            raise ValueError("the extrapolated warm start (extrapolation > 0) is admm-epi's (lfcl/solvers/epi.py)")
         self.set_lens_weights(lens_weights)
         self.set_cross_channel(params.cross_channel)
         self._exact = self._uses_lens_solve(params)

@@ -96,6 +96,8 @@ class EpiSetting:
     start: str  # the first estimate (lfcl.demosaic.methods.solve_aligned's ``start``)
     xc_per_lam: float = 0.0  # lam_xc = xc_per_lam * lam: the cross-channel block along the epipolar lines (0: none)
     depth_step: float = DEPTH_STEP  # the disparity's candidate spacing (lenses per view step; epi_depth_options)
+    cg_steps: int = 5  # CG steps per x-update
+    extrapolation: float = 0.0  # CG's warm start x_k + extrapolation (x_k - x_{k-1}) (AdmmParams.extrapolation)
 
 
 #: admm-epi's defaults by noise level, fitted by research/fit_epi.py on training seeds with the noise model
@@ -105,15 +107,19 @@ class EpiSetting:
 #: lines (xc_per_lam) won at every level; the fall-back (fb_per_lam > 0, with the rays weighted by the disparity's
 #: confidence) lost at every level to the EPI prior on every ray (research/fit_epi_fit_48.json: depth "trusted"
 #: against "shipped"); with it the guarded start won at 12-50 lux too (research/fit_epi_starts_48.json).
+#: From the 2-lux row up the x-update takes 3 CG steps from the extrapolated warm start x_k + 0.8 (x_k - x_{k-1})
+#: instead of 5 from x_k: about a quarter fewer gathers for +0.05..+0.10 dB of centre view on the training captures
+#: (research/epi_extrapolation.py; docs/admm.md, "The extrapolated warm start"); the 0.5-lux row keeps 5 from x_k,
+#: where the extrapolation needed more iterations and cost the mean image up to 0.4 dB.
 EPI_SCHEDULE = (  # the median sigma of the training captures at 0.5, 2, 12 and 50 lux
     EpiSetting(sigma=1.03e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.02, iterations=20, start="guarded",
                xc_per_lam=1.0, depth_step=0.2),
     EpiSetting(sigma=1.92e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.05, iterations=40, start="guarded",
-               xc_per_lam=1.0, depth_step=0.2),
+               xc_per_lam=1.0, depth_step=0.2, cg_steps=3, extrapolation=0.8),
     EpiSetting(sigma=4.6e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.05, iterations=40, start="guarded",
-               xc_per_lam=1.0, depth_step=0.2),
+               xc_per_lam=1.0, depth_step=0.2, cg_steps=3, extrapolation=0.8),
     EpiSetting(sigma=9.24e-3, lam_per_sigma=0.4, fb_per_lam=0.0, change_per_sigma=0.05, iterations=20, start="guarded",
-               xc_per_lam=1.0, depth_step=0.1),
+               xc_per_lam=1.0, depth_step=0.1, cg_steps=3, extrapolation=0.8),
 )
 
 #: lfcl.depth.estimate_disparity's options for admm-epi (its own defaults otherwise, the half apertures among them):
@@ -155,7 +161,9 @@ def epi_setting(sigma: float, schedule=None) -> EpiSetting:
                       change_per_sigma=(1 - t) * a.change_per_sigma + t * b.change_per_sigma,
                       iterations=round((1 - t) * a.iterations + t * b.iterations),
                       start=a.start if t < 0.5 else b.start, xc_per_lam=(1 - t) * a.xc_per_lam + t * b.xc_per_lam,
-                      depth_step=a.depth_step if t < 0.5 else b.depth_step)
+                      depth_step=a.depth_step if t < 0.5 else b.depth_step,
+                      cg_steps=a.cg_steps if t < 0.5 else b.cg_steps,
+                      extrapolation=a.extrapolation if t < 0.5 else b.extrapolation)
 
 
 def epi_start(sigma: float, pitch) -> tuple[str, str | None]:
@@ -179,7 +187,7 @@ def epi_params(params: AdmmParams, sigma: float, *, lam=None, iterations=None, s
                ) -> tuple[AdmmParams, float]:
     """``params`` (lfcl.demosaic.methods.admm_params's for admm-epi) with lam and the stop (change rule and most
     iterations) of :func:`epi_setting` at ``sigma`` where they were not given explicitly, lam_xc = xc_per_lam lam
-    (the cross-channel block), and lam_fb.
+    (the cross-channel block), the x-update's CG steps and warm-start extrapolation, and lam_fb.
     An explicit ``iterations`` runs that many (no change rule), as for the other methods."""
     sigma = max(float(sigma), 1e-6)
     setting = epi_setting(sigma)
@@ -187,7 +195,8 @@ def epi_params(params: AdmmParams, sigma: float, *, lam=None, iterations=None, s
         params = dataclasses.replace(params, lam=strength * setting.lam_per_sigma * sigma)
     if iterations is None:
         params = dataclasses.replace(params, max_iter=setting.iterations, change_tol=setting.change_per_sigma * sigma)
-    params = dataclasses.replace(params, lam_xc=setting.xc_per_lam * params.lam)
+    params = dataclasses.replace(params, lam_xc=setting.xc_per_lam * params.lam, cg_steps=setting.cg_steps,
+                                 extrapolation=setting.extrapolation)
     return params, setting.fb_per_lam * params.lam
 
 
@@ -196,7 +205,7 @@ def _check_params(params: AdmmParams):
         raise ValueError("x_update 'lens' needs the (u, v) prior; the EPI prior couples lenses (use 'cg' or 'auto')")
 
 
-def epi_solver_bytes(sensor_shape, fallback: bool, cross_channel: bool = False) -> int:
+def epi_solver_bytes(sensor_shape, fallback: bool, cross_channel: bool = False, extrapolation: bool = False) -> int:
     """Device memory an EpiAdmmSolver.solve needs, with its start and mosaic (bytes)."""
     H, W = (int(n) for n in sensor_shape)
     planes = 3 * H * W
@@ -207,7 +216,19 @@ def epi_solver_bytes(sensor_shape, fallback: bool, cross_channel: bool = False) 
     floats = 9 * planes + 2 * planes + blocks * (4 * planes + 2 * H * W) + 2 * H * W + 3 * H * -(-W // 16)
     if cross_channel:  # z, u and the K x scratch ([2, 2, H, W] each) and diag(D^T D) [H, W]
         floats += 3 * 4 * H * W + H * W
+    if extrapolation:  # N x_k - N x_{k-1}
+        floats += planes
     return 4 * floats
+
+
+def epi_extrapolate_np(x, x_prev, r, dnx, beta: float):
+    """The twin of lfcl/kernels/epi.cl ``epi_extrapolate`` (float32, the kernel's order of operations): CG's warm
+    start ``x + beta (x - x_prev)`` and its residual ``r - beta dnx`` (``dnx`` = N x - N x_prev), the anchor
+    ``x_prev = x`` and ``dnx = beta dnx + r``. Returns the new (x, x_prev, r, dnx)."""
+    x, x_prev, r, dnx = (np.asarray(v, np.float32) for v in (x, x_prev, r, dnx))
+    beta = np.float32(beta)
+    rn = r - beta * dnx
+    return x + beta * (x - x_prev), x.copy(), rn, beta * dnx + rn
 
 
 def epi_cross_gradient_np(x, disparity, pitch, confidence=None, matrix=None) -> np.ndarray:
@@ -323,6 +344,7 @@ class EpiAdmmSolver:
         self._scratch = runtime.empty(self.epi.gradient_shape)
         self._kdiag = runtime.empty((self.height, self.width))
         self._xdiag = self._cross_scratch = None  # diag(D_epi^T D_epi) and the scratch of the cross block, with it
+        self._dnx = None  # N x_k - N x_{k-1}, for the extrapolated warm start (made by the first solve that uses it)
         self._state: dict = {}  # (z, u) per block operator, of its gradient shape
         n = self._scratch.size
         self._chunks = -(-n // 16)  # the z/u step runs this many chunks for every block (past its end: sums of 0)
@@ -488,16 +510,34 @@ class EpiAdmmSolver:
         (epi_carry_rhs).
         Every :data:`EPI_REFRESH` iterations they are recomputed instead (:meth:`refresh`): the carry's float32
         round-off grows with the iterations.
+        With ``params.extrapolation`` = beta > 0, CG starts from ``x_k + beta (x_k - x_{k-1})`` instead of x_k (the
+        proximal term keeps x_k as its anchor, so the problem solved is the same), and its first residual is the
+        carried one less ``beta (N x_k - N x_{k-1})``, which the previous x-update's CG gives without a product (its
+        residual's change: ``epi_extrapolate``): fewer CG steps reach what more reached from x_k (docs/admm.md,
+        "The extrapolated warm start").
         """
         rho, vec, red = params.rho, self.vectors, self.reduce
         n_z = sum(z.size for z, _ in self._states)
         size = elementwise_size(self._scratch.size)  # every block's step over all the chunks (see __init__)
         residual, dual = self._cg[0], self._cg[1]  # CG's P r buffer is free until the next x-update
+        beta = float(params.extrapolation)
+        if beta > 0 and self._dnx is None:
+            self._dnx = self.runtime.empty(self.planes_shape)
+        planes_size = elementwise_size(x.size)
         while True:
-            vec.copy(x, self._x_prev)
+            if beta > 0 and history:  # CG from x_k + beta (x_k - x_{k-1}), its residual by N x_k - N x_{k-1}
+                self.runtime.launch("epi", "epi_extrapolate", planes_size, x.data, self._x_prev.data, residual.data,
+                                    self._dnx.data, np.float32(beta), np.uint64(x.size),
+                                    np.uint64(-(-x.size // 16)), defines=self._defines)
+            else:
+                vec.copy(x, self._x_prev)
+                if beta > 0:
+                    vec.copy(residual, self._dnx)
             steps = preconditioned_cg(vec, red, lambda src, out: self.normal(src, out, rho),
                                       lambda src, out: self.precondition(src, out, rho), x, self._rhs, self._cg,
                                       params.cg_steps, params.cg_tol, residual_ready=True, fused=CgSteps(self, rho))
+            if beta > 0:  # dnx = r at CG's start - r at its end (+ beta dnx before) = N x_{k+1} - N x_k
+                vec.axpby(1.0, self._dnx, -1.0, residual, self._dnx)
             red.enqueue(0, "diff_norm2", x, self._x_prev)
 
             def z_u_step(i, scratch):  # z, u, and scratch <- z' - z, with the sums of the residuals
@@ -673,7 +713,8 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     fallback = prior.has_fallback((S, W // int(pitch[1])))
     halo = epi_halo(depth.disparity, pitch)
     bands = epi_bands(S, halo, epi_lens_rows_that_fit((U, W), fallback, budget, runtime.device.max_mem_alloc_size,
-                                                      cross_channel=params.cross_channel))
+                                                      cross_channel=params.cross_channel,
+                                                      extrapolation=params.extrapolation > 0))
     if len(bands) == 1:
         solver = EpiAdmmSolver(runtime, (H, W), pattern, pitch, origin)
         run = solver.solve(b, x0, params, prior, callback=callback, lens_weights=lens_weights)
@@ -729,10 +770,10 @@ def epi_halo(disparity, pitch) -> int:
 
 
 def epi_lens_rows_that_fit(lens_row_shape, fallback: bool, budget: int, largest_buffer: int,
-                           cross_channel: bool = False) -> int:
+                           cross_channel: bool = False, extrapolation: bool = False) -> int:
     """The most lens rows whose EpiAdmmSolver fits ``budget`` bytes, with every buffer under ``largest_buffer``."""
     U, W = lens_row_shape
-    per_row = epi_solver_bytes((U, W), fallback, cross_channel)
+    per_row = epi_solver_bytes((U, W), fallback, cross_channel, extrapolation)
     return max(0, min(budget // per_row, largest_buffer // (4 * 6 * U * W)))
 
 

@@ -26,6 +26,9 @@ class AdmmParams:
     x_update:   "auto" (exact per-lens solve when the prior is over (u, v) only, else CG),
                 "cg" (always conjugate gradients) or "lens" (exact; (u, v) only). The
                 numpy reference always uses CG.
+    extrapolation: beta in [0, 1]: CG's warm start x_k + beta (x_k - x_{k-1}) instead of x_k, from
+                the second x-update on (admm-epi's solver and the numpy reference; 0: x_k, the only
+                value the other solvers take).
     """
 
     lam: float = 0.01
@@ -38,12 +41,15 @@ class AdmmParams:
     rel_tol: float = 0.0
     change_tol: float = 0.0
     x_update: str = "auto"
+    extrapolation: float = 0.0
 
     def __post_init__(self):
         for name in ("lam", "lam_xc", "rho", "cg_tol", "abs_tol", "rel_tol", "change_tol"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"ADMM parameter {name} must be a finite number >= 0, got {value!r}")
+        if not (isinstance(self.extrapolation, (int, float)) and 0 <= self.extrapolation <= 1):
+            raise ValueError(f"ADMM parameter extrapolation must be a number in [0, 1], got {self.extrapolation!r}")
         if self.rho <= 0:
             raise ValueError(f"ADMM parameter rho must be > 0, got {self.rho!r}")
         if self.x_update not in ("auto", "cg", "lens"):

@@ -116,7 +116,8 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
     left unpreconditioned as 0). The x-update is warm-started Jacobi-PCG. ``proximal`` > 0 adds
     ``proximal/2 ||x - x_k||^2`` to the x-update (proximal ADMM; the same fixed point), and to its diagonal.
     ``precondition(r)``, if given, replaces the Jacobi preconditioner (it must include ``proximal`` itself; no
-    ``diagonal`` then).
+    ``diagonal`` then). ``params.extrapolation`` = beta: from the second x-update on, CG starts from
+    ``x_k + beta (x_k - x_{k-1})`` (the proximal term's anchor stays x_k).
     """
     b = np.asarray(b, dtype=np.float64)
     x = np.array(x0, dtype=np.float64)
@@ -137,9 +138,12 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
     z = prior(x)
     u = np.zeros_like(z)
     history = []
+    x_older = None
     while True:
+        warm = x if x_older is None else x + params.extrapolation * (x - x_older)
         x_next, steps = conjugate_gradient(
-            normal, Atb + rho * prior_adjoint(z - u) + proximal * x, x, precondition, params.cg_steps, params.cg_tol
+            normal, Atb + rho * prior_adjoint(z - u) + proximal * x, warm, precondition, params.cg_steps,
+            params.cg_tol
         )
         dx = prior(x_next)
         v = dx + u
@@ -157,7 +161,7 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
         history.append(record)
         primal_scale = max(float(np.linalg.norm(dx)), float(np.linalg.norm(z_next)))
         dual_scale = rho * float(np.linalg.norm(prior_adjoint(u)))
-        x, z = x_next, z_next
+        x_older, x, z = x, x_next, z_next
         reason = stop_reason(params, record, primal_scale, dual_scale, z.size, x.size)
         if reason:
             return AdmmResult(x=x, history=history, stop_reason=reason)

@@ -146,6 +146,8 @@ class ResampledAdmmSolver:
             raise ValueError("x_update 'lens' needs an aligned grid: a resampled grid uses CG")
         if getattr(params, "cross_channel", False):
             raise ValueError("the cross-channel prior (lam_xc > 0) is not implemented for resampled grids")
+        if params.extrapolation:
+            raise ValueError("the extrapolated warm start (extrapolation > 0) is admm-epi's (lfcl/solvers/epi.py)")
         check_device_array(x0, self.planes_shape, "x0")
         rho, lam = params.rho, params.lam
         self._set_data(b, weights, rho)
