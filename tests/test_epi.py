@@ -262,7 +262,7 @@ def test_extrapolated_warm_start_matches_the_float64_reference(runtime, rng, lam
     EPI_REFRESH, against the reference's CG from that point with its residual computed; and it is not the run
     without it."""
     from lfcl.solvers.epi import EPI_REFRESH, EpiAdmmSolver, EpiPrior, admm_epi_reference
-    from lfcl.solvers.params import AdmmParams
+    from lfcl.solvers.params import AdmmParams, extrapolate
 
     S, T, U, V = 5, 4, 9, 9
     b, x0, _ = plane_scene_mosaic(rng, S, T, U, V)
@@ -277,6 +277,20 @@ def test_extrapolated_warm_start_matches_the_float64_reference(runtime, rng, lam
     assert_matches_the_reference(got, expected, iterations=iterations)
     plain = admm_epi_reference(b, "GRBG", (U, V), dataclasses.replace(params, extrapolation=0.0), x0, prior)
     assert np.linalg.norm(plain.x - expected.x) > 1e-3 * np.linalg.norm(expected.x)
+    # the run took both branches: x-updates from the extrapolated point, and a restart after a growing change
+    starts = [extrapolate(expected.history[:k]) for k in range(1, iterations)]
+    assert any(starts) and not all(starts)
+
+
+def test_extrapolation_restarts_after_a_growing_change():
+    from lfcl.solvers.params import IterationRecord, extrapolate
+
+    def history(*changes):
+        return [IterationRecord(iteration=i + 1, objective=0.0, primal_residual=0.0, dual_residual=0.0, rms_change=c,
+                                cg_steps=3) for i, c in enumerate(changes)]
+
+    assert extrapolate(history(1.0)) and extrapolate(history(1.0, 0.5)) and extrapolate(history(1.0, 0.5, 0.5))
+    assert not extrapolate(history(1.0, 1.5)) and not extrapolate(history(1.0, 0.5, 0.6))
 
 
 def test_extrapolation_kernel_matches_its_twin(runtime, rng):

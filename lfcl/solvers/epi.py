@@ -50,7 +50,7 @@ from ..ops.linalg import VectorOps, elementwise_size
 from ..ops.reduce import Reductions
 from .admm import weight_runs_np
 from .cg import preconditioned_cg
-from .params import AdmmParams, AdmmResult, BandedResult, IterationRecord, stop_reason
+from .params import AdmmParams, AdmmResult, BandedResult, IterationRecord, extrapolate, stop_reason
 from .reference import admm_operators
 
 
@@ -110,7 +110,8 @@ class EpiSetting:
 #: From the 2-lux row up the x-update takes 3 CG steps from the extrapolated warm start x_k + 0.8 (x_k - x_{k-1})
 #: instead of 5 from x_k: about a quarter fewer gathers for +0.05..+0.10 dB of centre view on the training captures
 #: (research/epi_extrapolation.py; docs/admm.md, "The extrapolated warm start"); the 0.5-lux row keeps 5 from x_k,
-#: where the extrapolation needed more iterations and cost the mean image up to 0.4 dB.
+#: where the extrapolation needed more iterations and cost the mean image up to 0.4 dB. It restarts after an
+#: iteration that changed x more than the one before (lfcl/solvers/params.py extrapolate).
 EPI_SCHEDULE = (  # the median sigma of the training captures at 0.5, 2, 12 and 50 lux
     EpiSetting(sigma=1.03e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.02, iterations=20, start="guarded",
                xc_per_lam=1.0, depth_step=0.2),
@@ -514,7 +515,8 @@ class EpiAdmmSolver:
         proximal term keeps x_k as its anchor, so the problem solved is the same), and its first residual is the
         carried one less ``beta (N x_k - N x_{k-1})``, which the previous x-update's CG gives without a product (its
         residual's change: ``epi_extrapolate``): fewer CG steps reach what more reached from x_k (docs/admm.md,
-        "The extrapolated warm start").
+        "The extrapolated warm start"). After an iteration that changed x more than the one before, the next
+        starts from x_k (a restart, lfcl/solvers/params.py ``extrapolate``).
         """
         rho, vec, red = params.rho, self.vectors, self.reduce
         n_z = sum(z.size for z, _ in self._states)
@@ -526,8 +528,9 @@ class EpiAdmmSolver:
         planes_size = elementwise_size(x.size)
         while True:
             if beta > 0 and history:  # CG from x_k + beta (x_k - x_{k-1}), its residual by N x_k - N x_{k-1}
+                step = beta if extrapolate(history) else 0.0  # 0: from x_k, the change of N x still tracked
                 self.runtime.launch("epi", "epi_extrapolate", planes_size, x.data, self._x_prev.data, residual.data,
-                                    self._dnx.data, np.float32(beta), np.uint64(x.size),
+                                    self._dnx.data, np.float32(step), np.uint64(x.size),
                                     np.uint64(-(-x.size // 16)), defines=self._defines)
             else:
                 vec.copy(x, self._x_prev)

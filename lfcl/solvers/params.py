@@ -150,3 +150,12 @@ def stop_reason(params: AdmmParams, record: IterationRecord, primal_scale: float
     if record.iteration >= params.max_iter:
         return f"reached max_iter {params.max_iter}"
     return None
+
+
+def extrapolate(history) -> bool:
+    """Whether the next x-update starts from the extrapolated point (AdmmParams.extrapolation > 0) after the
+    iterations of ``history`` (IterationRecord; admm-epi's solver, lfcl/solvers/epi.py, and the numpy reference):
+    not after an iteration that changed x more than the one before it, a restart as for accelerated gradient methods
+    (O'Donoghue and Candes 2015). Without it the change stalled and rose on a noisy real light field, the change
+    rule did not fire for 34 iterations and the mean image fell 1.8 dB (docs/admm.md, "The extrapolated warm start")."""
+    return len(history) < 2 or history[-1].rms_change <= history[-2].rms_change

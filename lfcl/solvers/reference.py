@@ -23,7 +23,7 @@ from ..ops.cfa import cfa_adjoint_np, cfa_sample_np
 from ..ops.crosschannel import COLOUR_GRAM, stacked_prior_np
 from ..ops.gradient import gradient_adjoint_np, gradient_np, linked_count_np
 from ..ops.lensfill import lens_fill_np
-from .params import AdmmParams, AdmmResult, IterationRecord, stop_reason
+from .params import AdmmParams, AdmmResult, IterationRecord, extrapolate, stop_reason
 
 
 def neighbour_count(planes_shape, pitch, dims) -> np.ndarray:
@@ -117,7 +117,8 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
     ``proximal/2 ||x - x_k||^2`` to the x-update (proximal ADMM; the same fixed point), and to its diagonal.
     ``precondition(r)``, if given, replaces the Jacobi preconditioner (it must include ``proximal`` itself; no
     ``diagonal`` then). ``params.extrapolation`` = beta: from the second x-update on, CG starts from
-    ``x_k + beta (x_k - x_{k-1})`` (the proximal term's anchor stays x_k).
+    ``x_k + beta (x_k - x_{k-1})`` (the proximal term's anchor stays x_k), unless the last iteration changed x more
+    than the one before (lfcl.solvers.epi.extrapolate).
     """
     b = np.asarray(b, dtype=np.float64)
     x = np.array(x0, dtype=np.float64)
@@ -140,7 +141,8 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
     history = []
     x_older = None
     while True:
-        warm = x if x_older is None else x + params.extrapolation * (x - x_older)
+        step = params.extrapolation if x_older is not None and extrapolate(history) else 0.0
+        warm = x + step * (x - x_older) if step else x
         x_next, steps = conjugate_gradient(
             normal, Atb + rho * prior_adjoint(z - u) + proximal * x, warm, precondition, params.cg_steps,
             params.cg_tol
