@@ -118,7 +118,7 @@ def admm_operators(b, x0, params: AdmmParams, data_weights, *, forward, adjoint,
     ``precondition(r)``, if given, replaces the Jacobi preconditioner (it must include ``proximal`` itself; no
     ``diagonal`` then). ``params.extrapolation`` = beta: from the second x-update on, CG starts from
     ``x_k + beta (x_k - x_{k-1})`` (the proximal term's anchor stays x_k), unless the last iteration changed x more
-    than the one before (lfcl.solvers.epi.extrapolate).
+    than the one before (lfcl.solvers.params.extrapolate).
     """
     b = np.asarray(b, dtype=np.float64)
     x = np.array(x0, dtype=np.float64)
