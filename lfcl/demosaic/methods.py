@@ -80,8 +80,9 @@ ADMM_DEFAULTS = {
                                  xc_per_sigma=0.01),
     # The prior along the epipolar lines (dims "epi", lfcl/solvers/epi.py), from research/fit_epi.py
     # (docs/admm.md, "admm-epi"; training seeds 1, 2 of charts, deadleaves, finetexture, 48x48 lenses).
-    # lam, lam_fb, the stop and the start follow the noise by lfcl/solvers/epi.py EPI_SCHEDULE (its rows
-    # at 2-12 lux are these values); this entry gives rho, the CG steps and the tolerance_db path.
+    # lam, lam_fb, the stop, the start and the x-update (CG steps, warm start) follow the noise by
+    # lfcl/solvers/epi.py EPI_SCHEDULE (its rows at 2-12 lux are these lam and stop); this entry gives rho, and the
+    # CG steps and the tolerance_db path where no noise level chooses them.
     "admm-epi": AdmmDefaults(dims="epi", lam_per_sigma=0.2, change_per_sigma=0.05, max_iter=40, rho=1.0, cg_steps=5,
                              fb_per_sigma=0.0),
 }
