@@ -60,6 +60,23 @@ def test_exact_lens_solve_matches_converged_cg(runtime, rng, pattern, pitch):
     assert all(r.cg_steps == 0 for r in got.history)
 
 
+def test_lens_solve_at_a_large_pitch_on_a_large_frame(runtime, rng):
+    # Each lens's solve holds 2 (U V) floats in private arrays; PoCL, choosing the work-group itself, overflowed its
+    # thread stack from about 64x64 lenses at pitch 13 (a segmentation fault). With the (u, v) prior alone every lens
+    # is solved on its own, so the frame's result is its lenses' results: a crop of it solved alone must agree.
+    S, T, U, V = 64, 64, 13, 13
+    b, x0 = smooth_lightfield_mosaic(rng, S, T, U, V)
+    params = AdmmParams(lam=0.01, rho=0.3, max_iter=2, x_update="lens")
+    whole = AdmmSolver(runtime, b.shape, "GRBG", (U, V), "uv").solve(runtime.to_device(b), runtime.to_device(x0),
+                                                                       params)
+    rows, cols = slice(0, 4 * U), slice(0, 6 * V)
+    crop = AdmmSolver(runtime, (4 * U, 6 * V), "GRBG", (U, V), "uv").solve(
+        runtime.to_device(np.ascontiguousarray(b[rows, cols])), runtime.to_device(np.ascontiguousarray(x0[:, rows, cols])),
+        params)
+    assert np.all(np.isfinite(whole.x.get()))
+    np.testing.assert_allclose(whole.x.get()[:, rows, cols], crop.x.get(), rtol=0, atol=1e-6)
+
+
 def test_lens_solve_needs_a_uv_prior(runtime, rng):
     b, x0 = smooth_lightfield_mosaic(rng, 2, 2, 9, 9)
     solver = AdmmSolver(runtime, b.shape, "GRBG", (9, 9), "uvst")

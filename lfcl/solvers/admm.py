@@ -224,6 +224,11 @@ class AdmmSolver:
         # squared updates of lens_solve, fetched in one copy per iteration
         self._rows = 3 * self.height
         self._lens_grid = (2 * -(-(self.width // self.V) // 4), self.height // self.U, 3)
+        # lens_solve holds 2 (U V) floats per work-item in private arrays (22 KB at pitch 37). PoCL on a CPU runs a
+        # work-group's work-items on one thread's stack and, left to choose, made groups large enough to overflow it
+        # (a segmentation fault at pitch 13 from 64x64 lenses on); one work-item a group, as linear4d's kernel. Other
+        # devices choose their own.
+        self._lens_group = (1, 1, 1) if runtime.device.type & cl.device_type.CPU else None
         self._sums_host = np.empty(5 * self._rows + int(np.prod(self._lens_grid)), np.float32)
         self._sums = runtime.zeros(self._sums_host.shape)
 
@@ -344,7 +349,7 @@ class AdmmSolver:
             "admm", "lens_solve", self._lens_grid,
             rhs.data, x.data, self._inverse[1].data, np.int32(self.height), np.int32(self.width),
             self._weight_runs.data, np.int32(bool(accumulate)), self._sums.data, np.int32(5 * self._rows),
-            defines=self._defines,
+            local_size=self._lens_group, defines=self._defines,
         )
 
     def _conjugate_gradient(self, x, rhs, rho, max_steps, tol) -> int:
