@@ -399,6 +399,37 @@ def test_process_writes_the_depth_files(tmp_path):
 
 
 
+def test_same_raw_same_depth_bytes_and_strict_json(tmp_path):
+    # Two default runs (auto: admm-epi in this light) write the same bytes (no timings in the files' headers), and
+    # every JSON they write parses strictly: JSON has no NaN or Infinity (the safety net's k was Infinity).
+    import OpenImageIO as oiio
+    from click.testing import CliRunner
+
+    from lfcl.cli import cli
+
+    def strict(text):
+        def refuse(constant):
+            raise AssertionError(f"not JSON: {constant}")
+        return json.loads(text, parse_constant=refuse)
+
+    capture = tmp_path / "capture"
+    result = CliRunner().invoke(cli, ["simulate", "--scene", "charts", "--lenses", "10x12", "--lux", "2",
+                                      "--seed", "3", "-o", str(capture)])
+    assert result.exit_code == 0, result.output
+    runs = [tmp_path / "a", tmp_path / "b"]
+    for out in runs:
+        result = CliRunner().invoke(cli, ["process", str(capture / "raw.dng"), "--outputs", "center,depth",
+                                          "-o", str(out), "--json"])
+        assert result.exit_code == 0, result.output
+        printed = strict(result.output)
+    assert printed["parameters"]["auto"]["method"] == "admm-epi"
+    summary = strict((runs[0] / "summary.json").read_text())
+    assert summary["parameters"]["safety_net"]["k"] is None
+    for name in ("depth.exr", "depth_confidence.exr", "depth.png", "center.exr", "center.png"):
+        assert (runs[0] / name).read_bytes() == (runs[1] / name).read_bytes(), name
+        strict(oiio.ImageBuf(str(runs[0] / name)).spec().getattribute("ImageDescription"))
+
+
 def test_smoothing_fills_unknown_lenses_from_their_neighbours(rng):
     # A textured field at d = 0.6 with a flat (texture-less) square in the middle: its inner lenses are
     # unknown; smoothing moves them towards their neighbours and leaves the confident lenses alone.

@@ -240,7 +240,7 @@ def with_safety_net(result: DemosaicResult, mosaic, pattern, pitch, origin, lens
 
     k = net_k(result.method)
     if math.isinf(k):
-        report = {"k": k, "lenses": 0, "lenses_from_malvar": 0,
+        report = {"k": None, "lenses": 0, "lenses_from_malvar": 0,
                   "why": f"not applied: {result.method}'s lens means are its own (fitted per method on the training "
                          "captures, lfcl/demosaic/safety_net.py)"}
         return dataclasses.replace(result, parameters={**result.parameters, "safety_net": report})

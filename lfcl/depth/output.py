@@ -56,7 +56,9 @@ def preview(depth, value_range=None) -> np.ndarray:
 
 def depth_files(depth, metadata: dict | None = None) -> list[tuple[str, np.ndarray, dict]]:
     """``(name, image, metadata)`` of the three files, nothing written."""
-    base = {**(metadata or {}), "output": "depth", "depth": depth.as_dict()}
+    described = depth.as_dict()
+    described.pop("seconds")  # the files' headers hold no timings: the same raw and options give the same bytes
+    base = {**(metadata or {}), "output": "depth", "depth": described}
     lo, hi = preview_range(depth)
     return [
         ("depth.exr", depth.disparity, {**base, "channel": "disparity d, lenses per view step (one float32 channel)"}),

@@ -125,10 +125,10 @@ def write_image(path, image: np.ndarray, metadata: dict | None = None, *, pixel_
     if path.suffix.lower() == ".exr":
         spec.attribute("compression", "zip")
     for key, value in (metadata or {}).items():
-        spec.attribute(f"lfcl:{key}", value if isinstance(value, str) else json.dumps(value))
+        spec.attribute(f"lfcl:{key}", value if isinstance(value, str) else to_json(value))
     if metadata:
         # TIFF keeps no custom attributes; ImageDescription survives in every format.
-        spec.attribute("ImageDescription", json.dumps({"lfcl": metadata}))
+        spec.attribute("ImageDescription", to_json({"lfcl": metadata}))
     with atomic_path(path) as tmp:
         out = oiio.ImageOutput.create(str(tmp))
         if out is None or not out.open(str(tmp), spec):
@@ -140,10 +140,20 @@ def write_image(path, image: np.ndarray, metadata: dict | None = None, *, pixel_
     return path
 
 
+def to_json(data, **options) -> str:
+    """``data`` as strict JSON: NaN and Infinity, which Python's json writes but JSON has not, are refused (a number
+    a stage recorded that way is a defect to mend where it is made, not text that other readers choke on)."""
+    try:
+        return json.dumps(data, allow_nan=False, **options)
+    except ValueError as error:
+        raise ValueError(f"metadata with a NaN or Infinity cannot be written as JSON ({error})") from None
+
+
 def write_json(path, data) -> Path:
-    """Write ``data`` as indented JSON, atomically."""
+    """Write ``data`` as indented JSON (:func:`to_json`), atomically."""
+    text = to_json(data, indent=2, sort_keys=False) + "\n"
     with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(data, indent=2, sort_keys=False) + "\n")
+        tmp.write_text(text)
     return Path(path)
 
 

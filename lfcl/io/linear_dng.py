@@ -41,7 +41,6 @@ linear sRGB (ColorMatrix1 = XYZ -> sRGB, the simulator's convention) and the fil
 from __future__ import annotations
 
 import dataclasses
-import json
 from fractions import Fraction
 from pathlib import Path
 
@@ -267,7 +266,7 @@ def write_linear_dng(path, image: np.ndarray, camera: DngCamera | None = None, m
     import tifffile
 
     from .. import __version__
-    from .images import atomic_path
+    from .images import atomic_path, to_json
 
     image = np.asarray(image)
     if image.ndim != 3 or image.shape[2] != 3 or min(image.shape[:2]) < 1:
@@ -275,7 +274,7 @@ def write_linear_dng(path, image: np.ndarray, camera: DngCamera | None = None, m
     camera = camera or DngCamera.from_matrix(None, (1.0, 1.0, 1.0))
     path = Path(path)
     meta = {**(metadata or {}), "dng": camera.metadata()}
-    description = json.dumps({"lfcl": meta})  # ASCII (json escapes the rest), as TIFF wants
+    description = to_json({"lfcl": meta})  # ASCII (json escapes the rest), as TIFF wants
     layout = [
         (50713, SHORT, 2, (1, 1), True),  # BlackLevelRepeatDim
         (50714, LONG, 3, (0, 0, 0), True),  # BlackLevel: subtracted already

@@ -291,7 +291,8 @@ class DemosaicParameters(_Schema):
     safety_net: bool = param(
         True, kind=bool,
         help="Keep every lens's colour means within the noise of Malvar's (lfcl/demosaic/safety_net.py; "
-             "docs/auto.md): never a mean image worse than Malvar's.")
+             "docs/auto.md), after every method but malvar and admm-epi (whose lens means, averaged along the "
+             "epipolar lines, are its own).")
     auto_costly: bool = param(
         True, kind=bool, flag="--auto-costly/--auto-cheap", recipe=5,
         help="With auto: --auto-costly (the default) lets its rule pick admm-epi, several times the others' time, "

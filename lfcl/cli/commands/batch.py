@@ -10,7 +10,6 @@ the summary lists every capture, and the exit code is 1 when any failed.
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
@@ -167,9 +166,9 @@ def command(inputs, out_dir, scheduler, workers, resume, as_json, **options):
                            "dashboard": cluster.dashboard},
                "resume": resume, "took_over_lock": lock.took_over, "leftovers_removed": leftovers,
                "settings_key": key, "settings": identity, "captures": results}
-    from ...io.images import write_json
+    from ...io.images import to_json, write_json
 
     write_json(out_dir / SUMMARY, summary)
-    click.echo(json.dumps(summary, indent=2) if as_json else summary_text(summary))
+    click.echo(to_json(summary, indent=2) if as_json else summary_text(summary))
     if counts["failed"]:
         sys.exit(1)

@@ -13,7 +13,6 @@ one-screen summary (``--json``: the summary as JSON).
 from __future__ import annotations
 
 import dataclasses
-import json
 import sys
 from pathlib import Path
 
@@ -325,7 +324,9 @@ def command(raw, out_dir, as_json, **options):
         if bar is not None:
             bar.close()
     if as_json:
-        click.echo(json.dumps(summary, indent=2))
+        from ...io.images import to_json
+
+        click.echo(to_json(summary, indent=2))
     else:
         click.echo(summary_text(raw, out_dir, summary))
 
