@@ -297,6 +297,29 @@ def test_bad_options_are_one_line_and_write_nothing(capture, tmp_path, args, mes
     assert not out.exists()
 
 
+
+@pytest.mark.parametrize("fmt", ["dng", "exr"])
+def test_an_output_never_replaces_its_input(capture, tmp_path, fmt):
+    # The raw sits in the output folder under an output's name (a DNG, or an EXR mosaic): refused, nothing written.
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    raw = folder / f"center.{fmt}"
+    if fmt == "dng":
+        raw.write_bytes((capture / "raw.dng").read_bytes())
+        args = []
+    else:
+        from lfcl.io.images import write_image
+        from lfcl.io.raw import read_mosaic
+
+        write_image(raw, read_mosaic(capture / "raw.dng").data)
+        args = ["--pattern", "GRBG", "--pitch", "9"]
+    before = raw.read_bytes()
+    result = run(raw, "-o", folder, "--method", "malvar", "--outputs", "center", "--format", fmt, *args)
+    assert result.exit_code == 1
+    assert len(result.output.strip().splitlines()) == 1 and "would replace the input" in result.output, result.output
+    assert raw.read_bytes() == before
+    assert sorted(p.name for p in folder.iterdir()) == [raw.name]
+
 def test_refocus_alone_implies_the_output(capture, tmp_path):
     out = tmp_path / "out"
     result = run(capture / "raw.dng", "--method", "malvar", "-o", out, "--outputs", "center", "--refocus", "0.5",

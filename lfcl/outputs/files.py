@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import os
 import time
 from pathlib import Path
 
@@ -213,16 +214,24 @@ def _write_one(out_dir: Path, f: PlannedFile) -> Path:
     raise ValueError(f"unknown writer {f.writer!r}")
 
 
-def write_outputs(out_dir, files, seconds: dict | None = None) -> list[Path]:
+def write_outputs(out_dir, files, seconds: dict | None = None, inputs=()) -> list[Path]:
     """Write ``files`` (each atomically) into ``out_dir`` in order; all or nothing.
 
     If any write fails (or is interrupted), the files this call already wrote are
     removed, and ``out_dir`` too when this call created it and it is empty, then
     the error propagates. ``seconds`` (kind -> seconds) is updated as each file is
     written, so a last ``json`` file with a callable can report the writes before it.
+    ``inputs``: the run's input files (the raw, a calibration, a white image); a file
+    that would replace one of them is refused before anything is written.
     Returns the paths written.
     """
     out_dir = Path(out_dir)
+    for f in files:
+        target = out_dir / f.name
+        for source in inputs:
+            if target.exists() and Path(source).exists() and os.path.samefile(target, source):
+                raise ValueError(f"the output {target} is the input {source}: writing it would replace the input; "
+                                 "choose another output folder")
     created = []
     for parent in (out_dir, *out_dir.parents):
         if parent.exists():

@@ -404,16 +404,17 @@ class Outputs:
             plan.seconds["previews-setup"] += colour_seconds
         return plan
 
-    def write(self, plan, out_dir, extra=(), seconds: dict | None = None) -> list:
+    def write(self, plan, out_dir, extra=(), seconds: dict | None = None, inputs=()) -> list:
         """Write ``plan``'s files and then ``extra`` (``lfcl.outputs.files.PlannedFile``) into ``out_dir``: all or none.
 
-        ``seconds`` (kind -> write seconds) is filled in as the files are written.
+        ``seconds`` (kind -> write seconds) is filled in as the files are written; a file that would replace one of
+        ``inputs`` (paths) is refused before any is written.
         """
         if not isinstance(out_dir, (str, os.PathLike)):
             raise ValueError(f"Outputs needs an output folder path, got {type(out_dir).__name__}")
         from ..outputs.files import write_outputs
 
-        return write_outputs(out_dir, [*plan.files, *extra], seconds)
+        return write_outputs(out_dir, [*plan.files, *extra], seconds, inputs)
 
     def __call__(self, demosaiced: Demosaiced, out_dir) -> Written:
         _need(demosaiced, Demosaiced, "Outputs", "a Demosaiced (from Demosaic)")
@@ -543,6 +544,7 @@ class Pipeline:
             summary["output_seconds"] = _output_seconds(plan, compute, write, len(plan.files))
             return done()
 
-        outputs.write(plan, out_dir, [PlannedFile("summary.json", "summary", "json", final)], write)
+        inputs = [p for p in (path, grid.calibration, grid.white) if isinstance(p, (str, os.PathLike))]
+        outputs.write(plan, out_dir, [PlannedFile("summary.json", "summary", "json", final)], write, inputs)
         write.pop("summary", None)
         return final()
