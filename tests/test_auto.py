@@ -200,7 +200,7 @@ def test_choose_records_the_view_and_refuses_an_unknown_one():
 
 
 def test_auto_runs_the_chosen_method_and_records_why(rng):
-    mosaic = (0.3 + 0.02 * rng.standard_normal((36, 36))).astype(np.float32)
+    mosaic = (0.3 + 0.02 * rng.standard_normal((216, 216))).astype(np.float32)
     noise = NoiseEstimate(gain=0.0, floor=0.008**2, sigma=0.008, source="test")  # a cheap pick's band
     auto = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "auto", noise=noise)
     choice = choose(0.008, lens_ratio=auto.parameters["auto"]["lens_ratio"])
@@ -217,7 +217,7 @@ def test_auto_at_low_light_runs_admm_epi_from_its_own_start(rng):
     from its schedule's start (guarded), not from Malvar."""
     from lfcl.solvers.epi import epi_start
 
-    mosaic = (0.3 + 0.02 * rng.standard_normal((36, 36))).astype(np.float32)
+    mosaic = (0.3 + 0.02 * rng.standard_normal((216, 216))).astype(np.float32)
     noise = NoiseEstimate(gain=0.0, floor=0.0015**2, sigma=0.0015, source="test")
     choice = choose(0.0015)
     assert (choice.method, choice.start) == ("admm-epi", None)
@@ -250,7 +250,7 @@ def test_auto_cheap_never_picks_a_costly_method_and_stays_safe():
 
 
 def test_auto_cheap_runs_the_cheap_rule_s_pick(rng):
-    mosaic = (0.3 + 0.02 * rng.standard_normal((36, 36))).astype(np.float32)
+    mosaic = (0.3 + 0.02 * rng.standard_normal((216, 216))).astype(np.float32)
     noise = NoiseEstimate(gain=0.0, floor=0.0015**2, sigma=0.0015, source="test")
     auto = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "auto", noise=noise, auto_costly=False)
     choice = choose(0.0015, lens_ratio=auto.parameters["auto"]["lens_ratio"], costly=False)
@@ -296,7 +296,7 @@ def test_auto_without_linear4d_coefficients_for_the_pitch_runs_from_malvar(rng, 
     band = {"sigma_from": 0.0, "sigma_to": 1.0, "candidate": candidate, "worst_gain_db": 0.0, "median_gain_db": 0.0,
             "tie_db": 0.1, "captures": 1}
     monkeypatch.setattr(lfcl.demosaic.auto, "load_rules", lambda: {"rules": {"both": [band]}})
-    mosaic = (0.3 + 0.02 * rng.standard_normal((25, 25))).astype(np.float32)  # 5x5 lenses of 5x5 pixels
+    mosaic = (0.3 + 0.02 * rng.standard_normal((80, 80))).astype(np.float32)  # 16x16 lenses of 5x5 pixels
     noise = NoiseEstimate(gain=0.0, floor=0.004**2, sigma=0.004, source="test")
     auto = demosaic_grid(mosaic, "GRBG", AlignedGrid((5, 5)), "auto", noise=noise)
     record = auto.parameters["auto"]
@@ -305,3 +305,20 @@ def test_auto_without_linear4d_coefficients_for_the_pitch_runs_from_malvar(rng, 
     assert "coefficients for 9x9 lenses only, not 5x5" in record["reason"]
     direct = demosaic_grid(mosaic, "GRBG", AlignedGrid((5, 5)), ran[0], noise=noise, strength=ran[1])
     np.testing.assert_array_equal(auto.planes, direct.planes)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (3, 40), (23, 30)])
+def test_auto_runs_malvar_on_a_frame_too_small_for_the_priors(rng, shape):
+    # Fewer lenses on a side than twice admm-epi's halo: most lenses lie at the frame's edge, where the priors lost to
+    # Malvar (docs/auto.md, "Small frames"). Decided before any noise estimate (a 1x1-lens raw allows none).
+    from lfcl.demosaic.auto import PRIOR_DMAX, min_lenses
+    from lfcl.solvers.epi import epi_halo
+
+    assert min_lenses((9, 9)) == 2 * epi_halo([PRIOR_DMAX], (9, 9)) == 24
+    S, T = shape
+    mosaic = (0.3 + 0.02 * rng.standard_normal((9 * S, 9 * T))).astype(np.float32)
+    auto = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "auto")
+    record = auto.parameters["auto"]
+    assert auto.method == record["method"] == "malvar" and record["sigma"] is None
+    assert f"a frame of {S}x{T} lenses, fewer than 24 on a side" in record["reason"]
+    np.testing.assert_array_equal(auto.planes, demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "malvar").planes)

@@ -21,7 +21,7 @@ from lfcl.batch.record import LOCK, RECORD, BatchLock
 from lfcl.cli import cli
 
 GOOD = [f"cap{i}" for i in range(5)]
-FAST = ["--iterations", "3"]  # the same options in every batch below that is compared with another run
+FAST = ["--method", "admm-uv", "--iterations", "3"]  # the same options in every batch below compared with another run
 PROCESS_FILES = {"center.exr", "center.png", "mean.exr", "mean.png", "lightfield.npy", "summary.json"}
 
 

@@ -413,7 +413,7 @@ def test_same_raw_same_depth_bytes_and_strict_json(tmp_path):
         return json.loads(text, parse_constant=refuse)
 
     capture = tmp_path / "capture"
-    result = CliRunner().invoke(cli, ["simulate", "--scene", "charts", "--lenses", "10x12", "--lux", "2",
+    result = CliRunner().invoke(cli, ["simulate", "--scene", "charts", "--lenses", "24x26", "--lux", "2",
                                       "--seed", "3", "-o", str(capture)])
     assert result.exit_code == 0, result.output
     runs = [tmp_path / "a", tmp_path / "b"]

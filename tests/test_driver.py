@@ -100,14 +100,14 @@ def test_a_method_the_resampled_grid_does_not_take_is_the_same_one_line(tmp_path
 def _aligned_case():
     from lfcl.sim import simulate
 
-    capture = simulate("charts", lenses=(6, 6), lux=12, seed=0)
+    capture = simulate("charts", lenses=(24, 24), lux=12, seed=0)  # auto's smallest frame for a prior
     return capture.normalised_raw(), capture.pattern, AlignedGrid(9)
 
 
 def _resampled_case():
-    geometry = GridGeometry((45, 51), "hex", 5.6, -0.6, (0.1, 0.3))
+    geometry = GridGeometry((100, 112), "hex", 5.6, -0.6, (0.1, 0.3))  # 18x19 lenses: auto's smallest for a prior
     rng = np.random.default_rng(0)
-    raw = (0.3 * geometry.white_expected("GRBG", 1.0) + 0.01 * rng.standard_normal((45, 51))).astype(np.float32)
+    raw = (0.3 * geometry.white_expected("GRBG", 1.0) + 0.01 * rng.standard_normal((100, 112))).astype(np.float32)
     return raw, "GRBG", ResampledGrid.of(geometry, "GRBG")
 
 

@@ -147,7 +147,7 @@ def test_auto_records_the_ratio_of_the_raw(rng):
     from lfcl.demosaic.driver import demosaic_grid
     from lfcl.grid.model import AlignedGrid
 
-    flat_lenses = rng.random((20, 20, 1, 1)) * np.ones((1, 1, 9, 9))
+    flat_lenses = rng.random((24, 24, 1, 1)) * np.ones((1, 1, 9, 9))  # auto's smallest frame for a prior
     flat_lenses[:, :, :, 4] += 0.2
     mosaic = lenses_mosaic(flat_lenses * 0.5 + rng.normal(0, 0.004, flat_lenses.shape))
     noise = NoiseEstimate(gain=0.0, floor=0.004**2, sigma=0.004, source="raw")

@@ -59,6 +59,15 @@ def captures(tmp_path_factory):
     return root
 
 
+@pytest.fixture
+def any_frame(monkeypatch):
+    """These 16x16-lens captures are narrower than auto's smallest frame for a prior (lfcl.demosaic.auto.min_lenses,
+    tested in tests/test_auto.py and below): the tests of the rule's mechanics take them with that guard off."""
+    import lfcl.demosaic.auto
+
+    monkeypatch.setattr(lfcl.demosaic.auto, "small_frame", lambda lenses, pitch: None)
+
+
 @pytest.fixture(scope="module")
 def processed(captures, tmp_path_factory):
     """``run(grid, method, *options)`` -> (out folder, summary, text): `lfcl process --calibration`, once per set."""
@@ -172,7 +181,7 @@ def test_batch_writes_the_same_bytes_as_process(captures, processed, tmp_path):
 
 
 @pytest.mark.parametrize("grid", ["rotated", "aligned"])
-def test_auto_names_and_runs_its_choice(grid, processed):
+def test_auto_names_and_runs_its_choice(any_frame, grid, processed):
     from lfcl.demosaic.auto import AUTO_FALLBACK, choose
     from lfcl.demosaic.names import RESAMPLED_METHODS as GRID_METHODS
 
@@ -207,7 +216,7 @@ def _rules(both, **views):
     return {"rules": {"both": both, "center": views.get("center", both), "mean": views.get("mean", both)}}
 
 
-def test_auto_cheap_takes_the_rule_fitted_without_the_costly_methods(captures, monkeypatch, tmp_path):
+def test_auto_cheap_takes_the_rule_fitted_without_the_costly_methods(any_frame, captures, monkeypatch, tmp_path):
     import lfcl.demosaic.auto
 
     rules = {**_rules(_rule("admm-st@1", {"malvar": 0.0, "admm-st@1": 0.2})),
@@ -232,7 +241,7 @@ def test_auto_cheap_takes_the_rule_fitted_without_the_costly_methods(captures, m
     assert result.exit_code == 0 and "auto_costly" not in json.loads(result.output)["options"]
 
 
-def test_auto_lists_what_it_skipped_for_a_safer_method(captures, monkeypatch, tmp_path):
+def test_auto_lists_what_it_skipped_for_a_safer_method(any_frame, captures, monkeypatch, tmp_path):
     import lfcl.demosaic.auto
 
     # admm-uv gains more in the middle but loses 0.5 dB to Malvar somewhere: Malvar is the pick
@@ -255,8 +264,8 @@ def test_auto_lists_what_it_skipped_for_a_safer_method(captures, monkeypatch, tm
     ("linear4d", {"method": "linear4d", "strength": 1.0, "start": "malvar"}),
     ("admm-uv@1:linear4d", {"method": "admm-uv", "strength": 1.0, "start": "linear4d"}),  # no linear4d there
 ])
-def test_auto_on_a_resampled_grid_replaces_a_method_it_cannot_run(captures, monkeypatch, tmp_path, candidate,
-                                                                  replaced):
+def test_auto_on_a_resampled_grid_replaces_a_method_it_cannot_run(any_frame, captures, monkeypatch, tmp_path,
+                                                                  candidate, replaced):
     import lfcl.demosaic.auto
 
     monkeypatch.setattr(lfcl.demosaic.auto, "load_rules", lambda: _rules(_rule(candidate, {candidate: 0.0, "admm-uv@1": -0.2})))
@@ -333,8 +342,8 @@ def test_a_linear4d_start_on_a_resampled_grid_is_one_line_before_any_work(captur
 @pytest.mark.parametrize("grid", ["rotated", "aligned"])
 @pytest.mark.parametrize("outputs, view, method", [("center", "center", "malvar"), ("mean,refocus", "mean", "admm-uv"),
                                                    ("center,lightfield", "both", "admm-st")])
-def test_auto_takes_the_rule_judged_on_the_outputs_asked_for(captures, monkeypatch, tmp_path, grid, outputs, view,
-                                                             method):
+def test_auto_takes_the_rule_judged_on_the_outputs_asked_for(any_frame, captures, monkeypatch, tmp_path, grid,
+                                                             outputs, view, method):
     import lfcl.demosaic.auto
 
     rules = _rules(_rule("admm-st@1", {"malvar": 0.0, "admm-uv@1": -0.3, "admm-st@1": 0.2}),
@@ -351,3 +360,13 @@ def test_auto_takes_the_rule_judged_on_the_outputs_asked_for(captures, monkeypat
     assert (auto["view"], auto["method"]) == (view, method)
     assert lfcl.demosaic.auto.VIEW_WORDS[view] in auto["reason"]
     assert summary["options"]["auto_view"] == view
+
+
+@pytest.mark.parametrize("grid", ["hex", "aligned"])
+def test_auto_runs_malvar_on_a_frame_too_small_for_the_priors(grid, processed):
+    # 16x16 simulated lenses (15x14 regular ones on the hex grid): narrower than 24 (lfcl.demosaic.auto.min_lenses at
+    # pitch 9), so auto runs Malvar and says why, on the resampled path as on the aligned one
+    _, summary, text = processed(grid, "auto", "--outputs", "center", "--no-previews")
+    auto = summary["parameters"]["auto"]
+    assert (auto["method"], auto["sigma"]) == ("malvar", None) and "fewer than 24 on a side" in auto["reason"]
+    assert "auto -> malvar (a frame of" in text and summary["iterations"] == 0

@@ -98,14 +98,14 @@ def test_process_summary_says_what_the_net_did(tmp_path):
     from lfcl.cli import cli
 
     capture = tmp_path / "cap"
-    assert CliRunner().invoke(cli, ["simulate", "--scene", "finetexture", "--lenses", "12x12", "--seed", "1",
+    assert CliRunner().invoke(cli, ["simulate", "--scene", "finetexture", "--lenses", "24x24", "--seed", "1",
                                     "-o", str(capture)]).exit_code == 0
     base = ["process", str(capture / "raw.dng"), "--pitch", "9", "--outputs", "center", "--no-previews"]
     text = CliRunner().invoke(cli, [*base, "--method", "admm-uv-xc", "-o", str(tmp_path / "text")])
     assert text.exit_code == 0, text.output
     assert "safety net: " in text.output and "lenses took Malvar's colour means" in text.output
     summary = json.loads((tmp_path / "text" / "summary.json").read_text())
-    assert summary["method"] == "admm-uv-xc" and summary["parameters"]["safety_net"]["lenses"] == 144
+    assert summary["method"] == "admm-uv-xc" and summary["parameters"]["safety_net"]["lenses"] == 24 * 24
     # the default writing only the centre view at 12 lux runs admm-epi, which keeps its own lens means, and says so
     default = CliRunner().invoke(cli, [*base, "-o", str(tmp_path / "default")])
     assert default.exit_code == 0, default.output

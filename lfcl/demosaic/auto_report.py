@@ -32,6 +32,8 @@ def skipped_by_auto(auto: dict | None, rule=None) -> list[dict]:
                         "reason": f"auto's rule names it, but {replaced.get('why', 'it does not run here')}: "
                                   f"{auto['method']} instead"})
         return skipped  # the rule's other candidates were weighed against a method that did not run
+    if auto.get("sigma") is None:  # a frame too small for any prior (lfcl.demosaic.auto.small_frame): no rule ran
+        return [{"output": "the priors", "stage": "demosaic", "reason": f"auto ran Malvar on {auto['reason']}"}]
     if rule is None:  # the shipped rule that chose, for its view
         rule = load_rule(auto.get("view", "both"))
     band, _ = band_for(float(auto["sigma"]), rule)

@@ -55,10 +55,19 @@ def resolve_auto(mosaic: np.ndarray, pattern: str, grid, *, noise: NoiseEstimate
     shipped rule holds one content class, so the ratio would only be recorded). A pick the grid does not take
     (a method not in ``grid.methods``, a start not in ``grid.starts``) becomes ``lfcl.demosaic.auto.AUTO_FALLBACK``
     at strength 1 from the Malvar start; linear4d on a pitch it has no coefficients for is replaced as
-    lfcl.demosaic.auto.for_pitch says. The replaced pick goes into the record's ``replaced``.
+    lfcl.demosaic.auto.for_pitch says. The replaced pick goes into the record's ``replaced``. A frame narrower
+    than lfcl.demosaic.auto.min_lenses on a side runs Malvar (lfcl.demosaic.auto.small_frame), before any noise
+    estimate.
     """
     from . import auto
 
+    if isinstance(grid, AlignedGrid):
+        lenses, pitch = (mosaic.shape[0] // grid.pitch[0], mosaic.shape[1] // grid.pitch[1]), grid.pitch
+    else:
+        lenses, pitch = grid.sampling.lenses, grid.sampling.views
+    small = auto.small_frame(lenses, pitch)
+    if small is not None:  # before the noise estimate, which a frame of a few lenses may not allow
+        return AutoResolution(small.method, 1.0, None, noise, {**small.as_dict(), "view": view, "costly": costly})
     lens_ratio = None
     if isinstance(grid, AlignedGrid):
         from ..noise.model import estimate_noise
