@@ -253,6 +253,18 @@ def _write(path, image):
     return path
 
 
+def test_a_float_mosaic_in_camera_units_is_refused(tmp_path):
+    # A float EXR of raw counts (black 64, white 4095) read as normalised would be "saturated" everywhere: refused.
+    from lfcl.io.raw import FLOAT_MOSAIC_MAX
+
+    counts = np.full((18, 18), 900.0, np.float32)
+    counts[::2, ::2] = 4095.0
+    with pytest.raises(ValueError, match="up to 4095: a float mosaic must be normalised"):
+        read_mosaic(_write(tmp_path / "counts.exr", counts), "GRBG")
+    edge = np.full((18, 18), FLOAT_MOSAIC_MAX, np.float32)  # at the limit: read, unclipped
+    np.testing.assert_array_equal(read_mosaic(_write(tmp_path / "edge.exr", edge), "GRBG").data, edge)
+
+
 def test_synthetic_image_layouts(tmp_path):
     rng = np.random.default_rng(0)
     plane = rng.uniform(-0.1, 1.3, (6, 8)).astype(np.float32)

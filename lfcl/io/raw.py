@@ -15,7 +15,8 @@ Two routes:
   it in the first channel with the others all zero (the layout of
   colour-demosaicing's Lighthouse ``*_CFA_*.exr`` files). Their pattern has to be
   given. Integer files are normalised by their type's maximum (OpenImageIO does
-  that when it reads them as float); float files are taken as they are. A file
+  that when it reads them as float); float files are taken as they are, and must be
+  normalised already (values above ``FLOAT_MOSAIC_MAX`` are refused). A file
   must hold the format its extension names (a DNG renamed .exr is refused, not
   read as a TIFF without its black level).
 
@@ -197,11 +198,18 @@ def _read_image_mosaic(path: Path, pattern: str | None, max_pixels: int) -> Mosa
     else:
         bits = None
         raw_max = float(data.max())
+        if raw_max > FLOAT_MOSAIC_MAX:  # in camera units: the saturation tests, depth and noise model would all be off
+            raise ValueError(f"{path.name} holds float values up to {raw_max:.6g}: a float mosaic must be normalised "
+                             "(black 0, white 1): subtract the black level and divide by white - black")
     return Mosaic(
         data=data, pattern=pattern, origin=(0, 0),
         black=[0.0, 0.0, 0.0, 0.0], white=1.0, source=str(path), bits=bits, raw_max=raw_max, kind="image",
     )
 
+
+#: The largest value a float image mosaic may hold: it is taken as normalised (black 0, white 1; values are not
+#: clipped, so noise and interpolation overshoot above 1 stay), and one in camera units (e.g. 64..4095) is refused.
+FLOAT_MOSAIC_MAX = 2.0
 
 #: Samples per band when an image mosaic is read (bounded temporary memory: the result is
 #: the only full-size array, whatever the file's channel count).
