@@ -219,6 +219,16 @@ class DecodeParameters(_Schema):
     pattern: str | None = param(None, kind=str,
                                 help="Bayer pattern; required for EXR/TIFF/PNG mosaics, read from raws.")
 
+    def _check(self):
+        if self.pattern is not None:  # checked before the raw is read, and recorded as the name it is (RGGB, ...)
+            from ..layout import parse_pattern
+
+            (entry,) = (e for e in entries(DecodeParameters) if e.name == "pattern")
+            try:
+                self._set("pattern", parse_pattern(self.pattern))
+            except ValueError as error:
+                raise entry.error(self.pattern, "is no Bayer pattern", str(error)) from None
+
 
 @dataclasses.dataclass(frozen=True)
 class GridParameters(_Schema):
