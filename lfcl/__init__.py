@@ -87,12 +87,18 @@ def lightfield(raw, *, pitch: int | None = None, calibration=None, white=None, p
     from .pipeline.stages import Decode, Demosaic, Grid
 
     if isinstance(raw, Mosaic):
+        from .layout import parse_pattern
+
+        if pattern is not None and parse_pattern(pattern) != raw.pattern:  # as a raw file with another pattern
+            raise ValueError(f"lightfield: pattern {pattern!r} given, but the raw's is {raw.pattern}")
         mosaic = raw
     elif hasattr(raw, "ndim"):  # a numpy array: the normalised mosaic itself
         import numpy as np
 
         if pattern is None:
             raise ValueError("lightfield: a mosaic array needs its Bayer pattern (pattern='GRBG', ...)")
+        if np.ndim(raw) != 2:
+            raise ValueError(f"lightfield: a mosaic array is 2-D [H, W], got shape {np.shape(raw)}")
         mosaic = Mosaic(data=np.ascontiguousarray(raw, dtype=np.float32), pattern=pattern, source="array")
     else:
         mosaic = Decode(pattern)(raw)

@@ -100,3 +100,9 @@ def test_the_public_api_demosaics_to_the_exchange_layout_and_processes_a_file(tm
         "malvar"
     with pytest.raises(ValueError, match="needs its Bayer pattern"):
         lfcl.lightfield(mosaic)
+    with pytest.raises(ValueError, match=r"is 2-D \[H, W\], got shape \(24,\)"):
+        lfcl.lightfield(mosaic[0, :24], pattern=capture.pattern)
+    other = "RGGB" if raw.pattern != "RGGB" else "GRBG"  # a read raw keeps its own pattern, as a raw file does
+    with pytest.raises(ValueError, match=f"pattern '{other.lower()}' given, but the raw's is {raw.pattern}"):
+        lfcl.lightfield(raw, pattern=other.lower(), pitch=9, method="malvar")
+    assert lfcl.lightfield(raw, pattern=raw.pattern.lower(), pitch=9, method="malvar").shape == (4, 6, 9, 9, 3)

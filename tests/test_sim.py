@@ -567,3 +567,16 @@ def test_cli_grid_bad_input(tmp_path, cli, args, words):
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("lfcl: error:") and words in lines[0], result.output
     assert not (tmp_path / "never").exists()
+
+
+def test_simulate_refuses_a_raw_libraw_cannot_read(tmp_path):
+    # LibRaw reads no raw narrower than 22 pixels (lfcl.sim.dng.MIN_DNG_SIDE): 2x3 lenses of 9 pixels would be a
+    # DNG that lfcl process refuses, so simulate refuses it; 3x3 lenses (27 pixels) read back.
+    from lfcl.cli import cli
+
+    result = CliRunner().invoke(cli, ["simulate", "--lenses", "2x3", "-o", str(tmp_path / "small")])
+    assert result.exit_code == 1 and "cannot read: it needs 22 pixels a side" in result.output, result.output
+    assert not (tmp_path / "small").exists()
+    result = CliRunner().invoke(cli, ["simulate", "--lenses", "3x3", "-o", str(tmp_path / "three")])
+    assert result.exit_code == 0, result.output
+    assert rawpy.imread(str(tmp_path / "three" / "raw.dng")).raw_image.shape == (27, 27)

@@ -70,12 +70,21 @@ def dng_tags(pattern: str, black_level: int, white_level: int, noise_profile=Non
     return tags
 
 
+#: LibRaw (rawpy, hence `lfcl process`) reads no raw narrower than this many pixels on a side: "Unsupported file
+#: format or not RAW file" (18x27 pixels failed, 27x27 read, LibRaw 0.22).
+MIN_DNG_SIDE = 22
+
+
 def write_dng(path, mosaic: np.ndarray, pattern: str, black_level: int, white_level: int,
               noise_profile=None) -> None:
-    """Write ``mosaic`` (uint16 ``[H, W]``) to ``path`` (not atomic: write into a temporary folder)."""
+    """Write ``mosaic`` (uint16 ``[H, W]``, at least :data:`MIN_DNG_SIDE` pixels a side) to ``path`` (not atomic:
+    write into a temporary folder)."""
     mosaic = np.asarray(mosaic)
     if mosaic.ndim != 2 or mosaic.dtype != np.uint16:
         raise ValueError(f"a DNG mosaic must be uint16 [H, W], got {mosaic.dtype} {mosaic.shape}")
+    if min(mosaic.shape) < MIN_DNG_SIDE:
+        raise ValueError(f"a {mosaic.shape[0]}x{mosaic.shape[1]}-pixel raw would be a DNG that LibRaw (and so lfcl "
+                         f"process) cannot read: it needs {MIN_DNG_SIDE} pixels a side (at pitch 9, 3 lenses)")
     if noise_profile is not None and np.ndim(noise_profile) == 1:
         noise_profile = [tuple(noise_profile)] * 3
     tifffile.imwrite(
