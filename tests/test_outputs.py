@@ -298,6 +298,18 @@ def test_bad_options_are_one_line_and_write_nothing(capture, tmp_path, args, mes
 
 
 
+
+def test_a_folder_in_an_output_s_place_stops_the_run_before_any_file_is_replaced(capture, tmp_path):
+    out = tmp_path / "out"
+    assert run(capture / "raw.dng", "-o", out, "--method", "malvar", "--outputs", "center").exit_code == 0
+    before = (out / "center.exr").stat()
+    (out / "mean.exr").mkdir()
+    result = run(capture / "raw.dng", "-o", out, "--method", "malvar", "--outputs", "center,mean")
+    assert result.exit_code == 1 and "something other than a file" in result.output, result.output
+    assert len(result.output.strip().splitlines()) == 1
+    after = (out / "center.exr").stat()  # the same file, untouched (a replacement is a new inode)
+    assert (after.st_ino, after.st_mtime_ns) == (before.st_ino, before.st_mtime_ns) and (out / "mean.exr").is_dir()
+
 @pytest.mark.parametrize("fmt", ["dng", "exr"])
 def test_an_output_never_replaces_its_input(capture, tmp_path, fmt):
     # The raw sits in the output folder under an output's name (a DNG, or an EXR mosaic): refused, nothing written.

@@ -222,12 +222,15 @@ def write_outputs(out_dir, files, seconds: dict | None = None, inputs=()) -> lis
     the error propagates. ``seconds`` (kind -> seconds) is updated as each file is
     written, so a last ``json`` file with a callable can report the writes before it.
     ``inputs``: the run's input files (the raw, a calibration, a white image); a file
-    that would replace one of them is refused before anything is written.
+    that would replace one of them, or a name held by something other than a file (a
+    folder), is refused before anything is written, so no earlier file is replaced.
     Returns the paths written.
     """
     out_dir = Path(out_dir)
     for f in files:
         target = out_dir / f.name
+        if target.exists() and not target.is_file():
+            raise ValueError(f"cannot write {target}: something other than a file (a folder?) has that name")
         for source in inputs:
             if target.exists() and Path(source).exists() and os.path.samefile(target, source):
                 raise ValueError(f"the output {target} is the input {source}: writing it would replace the input; "
