@@ -360,6 +360,7 @@ def _write_white(path, dn):
     ("bad-shape", "--sensor-shape"),
     ("packing", "packing"),
     ("rotation-with-white", "--rotation"),
+    ("rotation-90", "within +-45 degrees"),
 ])
 def test_cli_bad_input(tmp_path, cli, kind, words):
     rng = np.random.default_rng(1)
@@ -380,6 +381,8 @@ def test_cli_bad_input(tmp_path, cli, kind, words):
         args = ["--pitch", "9", "--sensor-shape", "576by576"]
     elif kind == "packing":
         args = ["--pitch", "9", "--sensor-shape", "90x90", "--packing", "triangle"]
+    elif kind == "rotation-90":
+        args = ["--pitch", "9", "--sensor-shape", "90x90", "--rotation", "90"]
     elif kind == "rotation-with-white":
         _write_white(white, simulate_white("square", 10, sensor_shape=(100, 100)).white)
         args = [str(white), "--rotation", "1"]
@@ -390,6 +393,20 @@ def test_cli_bad_input(tmp_path, cli, kind, words):
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("lfcl: error:") and words in lines[0], result.output
     assert not out.exists() and not csv.exists()
+
+
+def test_cli_never_writes_over_the_white_image_or_one_file_twice(tmp_path, cli):
+    white = _write_white(tmp_path / "white.dng", simulate_white("square", 10, sensor_shape=(100, 100)).white)
+    before = white.read_bytes()
+    for args, words in (([str(white), "-o", str(white)], "is the white image"),
+                        ([str(white), "-o", str(tmp_path / "c.json"), "--export-centers", str(white)],
+                         "is the white image"),
+                        ([str(white), "-o", str(tmp_path / "c.json"), "--export-centers", str(tmp_path / "c.json")],
+                         "name the same file")):
+        result = CliRunner().invoke(cli, ["calibrate", *args])
+        assert result.exit_code == 1 and words in result.output, result.output
+        assert len(result.output.strip().splitlines()) == 1
+    assert white.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["white.dng"]
 
 
 @pytest.mark.parametrize("args, words", [

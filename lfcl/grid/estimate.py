@@ -594,6 +594,9 @@ def calibration_from_pitch(pitch: float, sensor_shape, packing: str = "square", 
     for name, value in values.items():
         if not (isinstance(value, (int, float)) and math.isfinite(value) and abs(value) <= 1e6):
             raise ValueError(f"{name} must be a finite number of at most 1e6, got {value!r}")
+    if abs(rotation_deg) > 45:  # as lfcl simulate: a grid turned 90 degrees is itself, its rows taken for columns
+        raise ValueError(f"the rotation must be within +-45 degrees, got {rotation_deg:g} (a grid turned by 90 "
+                         "degrees is the same grid, with its lens rows and columns swapped)")
     H, W = (int(v) for v in sensor_shape)
     if H < 1 or W < 1 or H * W > MAX_PIXELS:
         raise ValueError(f"sensor shape {H}x{W} is outside 1 .. {MAX_PIXELS} pixels")

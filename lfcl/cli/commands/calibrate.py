@@ -31,6 +31,20 @@ def _parse_offset(value: str) -> tuple[float, float]:
     return numbers[0], numbers[1]
 
 
+def _check_paths(white, output, export_centers) -> None:
+    """The two files written must be two, and neither the white image: one line before any work."""
+    import os
+
+    if export_centers is not None and os.path.abspath(output) == os.path.abspath(export_centers):
+        raise ValueError(f"-o and --export-centers name the same file, {output}: give two")
+    for written in (output, export_centers):
+        if written is None or white is None:
+            continue
+        if os.path.abspath(written) == os.path.abspath(white) or (
+                os.path.exists(written) and os.path.exists(white) and os.path.samefile(written, white)):
+            raise ValueError(f"{written} is the white image: writing it would replace the input; name another file")
+
+
 @click.command("calibrate")
 @click.argument("white", required=False, type=click.Path(path_type=Path, readable=False), metavar="[WHITE]")
 @click.option("-o", "--output", "output", required=True, type=click.Path(path_type=Path, readable=False),
@@ -57,6 +71,7 @@ def command(white, output, export_centers, packing, pitch, sensor_shape, rotatio
     from ...grid.lattice import check_packing
 
     start = time.perf_counter()
+    _check_paths(white, output, export_centers)
     packing = "auto" if str(packing).lower() == "auto" else check_packing(packing)
     if white is None:
         if pitch is None or sensor_shape is None:
