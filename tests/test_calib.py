@@ -201,6 +201,21 @@ def test_aligned_camera_white_with_vignetting():
     assert cal.grid.pitch == pytest.approx(9, abs=0.01) and cal.grid.rotation_deg == pytest.approx(0, abs=0.02)
 
 
+def test_a_lattice_the_lens_centres_do_not_follow_is_refused():
+    # A scene raw taken for a white image (scatter 1.4 px), and a wrong --pitch hint that fits a lattice 45 degrees off
+    # at pitch / sqrt 2 (0.66 px): refused (MAX_LENS_SCATTER_PX), where they calibrated to a garbage grid before.
+    from lfcl.grid.estimate import MAX_LENS_SCATTER_PX
+
+    scene = simulate("charts", lenses=(32, 32), seed=1)
+    with pytest.raises(CalibrationError, match="lens centres scatter by"):
+        calibrate_array(normalised(scene.raw), scene.pattern)
+    white = normalised(simulate_white("square", 9.3, 0.4, sensor_shape=(372, 372), seed=2).white)
+    with pytest.raises(CalibrationError, match=f"more than {MAX_LENS_SCATTER_PX:.2f}; a white image, or the right"):
+        calibrate_array(white, "GRBG", pitch=7)
+    right = calibrate_array(white, "GRBG")
+    assert right.grid.pitch == pytest.approx(9.3, abs=0.01) and right.fit["lens_rms_px"] < 0.05
+
+
 def test_packing_and_pitch_options():
     cap = simulate_white("hex", 10.3, 0.5, (0.3, 0.7), sensor_shape=(300, 300), seed=4)
     data = normalised(cap.white)

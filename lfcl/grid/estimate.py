@@ -48,6 +48,11 @@ SMOOTH_PX = (0.12, 0.4)  # template smoothing (Gaussian sigma, px): least / most
 TABLE_STEPS_PER_PITCH = 16
 MAX_PIXELS = 1_500_000
 CONVERGED_PX = 0.002  # stop when the grid moves less than this anywhere on the sensor
+#: The most the fitted lens centres may scatter around the lattice (rms, px): simulated whites of pitch 4-31, dim
+#: and hex included, scatter 0.01-0.05 px, the aligned simulator's white of 10 % contrast 0.30 (its lattice within
+#: 0.05 px); a photograph or scene raw taken for a white image 1.4-2.8 px, a 5x5-lens white 0.90, and a lattice
+#: fitted from a wrong --pitch hint (45 degrees off, pitch / sqrt 2) 0.66 px, whose light field is garbage.
+MAX_LENS_SCATTER_PX = 0.5
 
 
 class CalibrationError(ValueError):
@@ -480,9 +485,10 @@ def refine(norm: np.ndarray, rows: np.ndarray, cols: np.ndarray, grid: LensGrid,
     if good_frac < 0.5:
         raise CalibrationError(f"no consistent lens grid in the white image (only {good_frac * 100:.0f} % of the "
                                "located lenses fit one lattice)")
-    if stats["lens_rms_px"] > 0.25 * grid.pitch:
+    if stats["lens_rms_px"] > min(0.25 * grid.pitch, MAX_LENS_SCATTER_PX):
         raise CalibrationError(f"no consistent lens grid in the white image (lens centres scatter by "
-                               f"{stats['lens_rms_px']:.2f} px around the best lattice)")
+                               f"{stats['lens_rms_px']:.2f} px around the best lattice, more than "
+                               f"{min(0.25 * grid.pitch, MAX_LENS_SCATTER_PX):.2f}; a white image, or the right --pitch?)")
     return grid, stats
 
 
