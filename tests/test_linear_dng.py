@@ -173,7 +173,7 @@ def test_plan_views_each_and_cli_choices(tmp_path):
     """Every image output becomes a DNG (views-each included); process and batch take --format dng."""
     from lfcl.cli.commands import batch, process
 
-    lightfield = (np.random.default_rng(1).random((5, 6, 3, 3, 3)) * 0.5).astype(np.float32)
+    lightfield = (np.random.default_rng(1).random((22, 24, 3, 3, 3)) * 0.5).astype(np.float32)  # LibRaw's least
     plan = plan_outputs(lightfield, ["center", "mean", "views", "views-each", "refocus"], slopes=[0.5], fmt="dng",
                         previews=False)
     names = [f.name for f in plan.files]
@@ -181,7 +181,8 @@ def test_plan_views_each_and_cli_choices(tmp_path):
     assert "refocus_+0.5.dng" in names and all(f.writer == "dng" for f in plan.files)
     written = write_outputs(tmp_path, plan.files)
     codes = tags_of(tmp_path / "mean.dng")["_page"]["data"]
-    np.testing.assert_array_equal(codes, np.rint(np.clip(mean_image(lightfield), 0, 1) * WHITE_LEVEL))
+    expected = np.rint(np.clip(mean_image(lightfield), 0, 1) * WHITE_LEVEL)  # up to one code: float32 rounding ties
+    np.testing.assert_allclose(codes, expected, rtol=0, atol=1)
     assert len(written) == len(names)
     for module in (process, batch):
         choices = {p.name: p for p in module.command.params}["fmt"].type.choices

@@ -316,8 +316,10 @@ def test_an_output_never_replaces_its_input(capture, tmp_path, fmt):
     folder = tmp_path / "folder"
     folder.mkdir()
     raw = folder / f"center.{fmt}"
-    if fmt == "dng":
-        raw.write_bytes((capture / "raw.dng").read_bytes())
+    if fmt == "dng":  # 22x22 lenses: a DNG view narrower than LibRaw reads is refused before (next test)
+        result = CliRunner().invoke(cli, ["simulate", "--lenses", "22x22", "--lux", "8", "-o", str(tmp_path / "c22")])
+        assert result.exit_code == 0, result.output
+        raw.write_bytes((tmp_path / "c22" / "raw.dng").read_bytes())
         args = []
     else:
         from lfcl.io.images import write_image
@@ -331,6 +333,14 @@ def test_an_output_never_replaces_its_input(capture, tmp_path, fmt):
     assert len(result.output.strip().splitlines()) == 1 and "would replace the input" in result.output, result.output
     assert raw.read_bytes() == before
     assert sorted(p.name for p in folder.iterdir()) == [raw.name]
+
+
+def test_dng_views_narrower_than_raw_editors_read_are_refused_before_the_demosaic(capture, tmp_path):
+    # 12x14 lenses: DNGs of 12x14 pixels, which LibRaw (rawpy, darktable, RawTherapee) does not open
+    out = tmp_path / "out"
+    result = run(capture / "raw.dng", "-o", out, "--method", "malvar", "--outputs", "center", "--format", "dng")
+    assert result.exit_code == 1 and "would be DNGs that raw editors cannot open" in result.output, result.output
+    assert len(result.output.strip().splitlines()) == 1 and not out.exists()
 
 def test_refocus_alone_implies_the_output(capture, tmp_path):
     out = tmp_path / "out"

@@ -256,6 +256,11 @@ def dng_codes(image: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(image.astype(np.float64) * WHITE_LEVEL), 0, WHITE_LEVEL).astype(np.uint16)
 
 
+#: LibRaw (rawpy, darktable's and RawTherapee's reader) opens no raw narrower than this many pixels on a side
+#: ("Unsupported file format or not RAW file": 21x21-pixel DNGs failed, 22x22 opened, LibRaw 0.22).
+MIN_DNG_SIDE = 22
+
+
 def write_linear_dng(path, image: np.ndarray, camera: DngCamera | None = None, metadata: dict | None = None) -> Path:
     """Write ``image`` ``(H, W, 3)`` (camera RGB, the normalised raw's units) as a LinearRaw DNG, atomically.
 
@@ -271,6 +276,9 @@ def write_linear_dng(path, image: np.ndarray, camera: DngCamera | None = None, m
     image = np.asarray(image)
     if image.ndim != 3 or image.shape[2] != 3 or min(image.shape[:2]) < 1:
         raise ValueError(f"a LinearRaw DNG holds an (H, W, 3) image, got shape {image.shape}")
+    if min(image.shape[:2]) < MIN_DNG_SIDE:
+        raise ValueError(f"{Path(path).name}: a {image.shape[0]}x{image.shape[1]} DNG would not open in raw editors (LibRaw "
+                         f"reads {MIN_DNG_SIDE} pixels a side at least): use --format exr or tiff")
     camera = camera or DngCamera.from_matrix(None, (1.0, 1.0, 1.0))
     path = Path(path)
     meta = {**(metadata or {}), "dng": camera.metadata()}

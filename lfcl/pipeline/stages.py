@@ -366,6 +366,16 @@ class Outputs:
     def options(self) -> dict:
         return self.parameters.options()
 
+    def check_grid(self, gridded: Gridded) -> None:
+        """What these outputs cannot be for this lens grid, refused before the demosaic: DNGs of a view narrower
+        than raw editors read (lfcl.io.linear_dng.MIN_DNG_SIDE lenses)."""
+        from ..io.linear_dng import MIN_DNG_SIDE
+
+        S, T = gridded.metadata["geometry"]["lenses"]
+        if self.fmt == "dng" and min(S, T) < MIN_DNG_SIDE:
+            raise ValueError(f"--format dng: the views of {S}x{T} lenses would be DNGs that raw editors cannot open "
+                             f"(LibRaw reads {MIN_DNG_SIDE} pixels a side at least): use --format exr or tiff")
+
     def file_metadata(self, demosaiced: Demosaiced) -> dict:
         """What every output file records: the Demosaic stage's metadata and this stage's ``metadata``."""
         return {**demosaiced.metadata, **self.metadata}
@@ -499,6 +509,8 @@ class Pipeline:
 
         mosaic = timed(decode, path)
         gridded = timed(grid, mosaic)
+        if outputs is not None:
+            outputs.check_grid(gridded)
         if "calibrate" in gridded.seconds:  # report the white image's calibration apart
             seconds["calibrate"] = gridded.seconds["calibrate"]
             seconds["grid"] = max(0.0, seconds["grid"] - seconds["calibrate"])

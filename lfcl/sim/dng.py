@@ -33,7 +33,10 @@ from __future__ import annotations
 import numpy as np
 import tifffile
 
-from ..io.linear_dng import XYZ_TO_SRGB  # XYZ (D65) -> linear sRGB: the simulated camera's primaries
+from ..io.linear_dng import (
+    MIN_DNG_SIDE,  # LibRaw, hence `lfcl process`, reads no narrower raw
+    XYZ_TO_SRGB,  # XYZ (D65) -> linear sRGB: the simulated camera's primaries
+)
 from ..io.linear_dng import rationals as _rationals  # the TIFF rationals, shared with the LinearRaw writer
 from ..layout import CHANNEL_INDEX, parse_pattern
 
@@ -70,9 +73,6 @@ def dng_tags(pattern: str, black_level: int, white_level: int, noise_profile=Non
     return tags
 
 
-#: LibRaw (rawpy, hence `lfcl process`) reads no raw narrower than this many pixels on a side: "Unsupported file
-#: format or not RAW file" (18x27 pixels failed, 27x27 read, LibRaw 0.22).
-MIN_DNG_SIDE = 22
 
 
 def write_dng(path, mosaic: np.ndarray, pattern: str, black_level: int, white_level: int,
