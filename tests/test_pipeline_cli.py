@@ -100,6 +100,22 @@ def test_evaluate_rejects_a_truth_of_another_shape(capture_dir, tmp_path):
     assert not (bad / "eval").exists()
 
 
+def test_evaluate_refuses_a_grid_capture_and_a_broken_meta_in_one_line(capture_dir, tmp_path):
+    grid = tmp_path / "grid"
+    result = CliRunner().invoke(cli, ["simulate", "--grid", "hex", "--pitch", "10.3", "--lenses", "12x12",
+                                      "-o", str(grid)])
+    assert result.exit_code == 0, result.output
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    for name in ("raw.dng", "truth.npy"):
+        (broken / name).write_bytes((capture_dir / name).read_bytes())
+    (broken / "meta.json").write_text("{not json")
+    for folder, words in ((grid, "is a capture of a hex lens grid"), (broken, "meta.json is not valid JSON")):
+        result = CliRunner().invoke(cli, ["evaluate", str(folder), "--methods", "malvar"])
+        assert result.exit_code == 1 and words in result.output, result.output
+        assert len(result.output.strip().splitlines()) == 1 and not (folder / "eval").exists()
+
+
 @pytest.mark.parametrize("args,message", [
     (["--methods", "malvar,bogus"], "unknown method"),
     (["--sweep-lux", "1,-2"], "positive"),

@@ -45,7 +45,15 @@ def load_capture(directory) -> Capture:
     for name in ("raw.dng", "meta.json", "truth.npy"):
         if not (directory / name).is_file():
             raise ValueError(f"{directory} is not a capture folder: {name} is missing (make one with `lfcl simulate`)")
-    meta = json.loads((directory / "meta.json").read_text())
+    try:
+        meta = json.loads((directory / "meta.json").read_text())
+    except ValueError as error:
+        raise ValueError(f"{directory / 'meta.json'} is not valid JSON ({error})") from None
+    if meta.get("mode") == "grid" or not isinstance(meta.get("pitch"), list):
+        grid = meta.get("lenslet", {}).get("grid", "another") if isinstance(meta.get("lenslet"), dict) else "another"
+        raise ValueError(f"{directory} is a capture of a {grid} lens grid (lfcl simulate --grid): lfcl evaluate scores "
+                         "captures of the aligned simulator (no --grid); calibrate the white image and run lfcl process "
+                         "--calibration on it instead (docs/geometry.md)")
     pitch = tuple(int(p) for p in meta["pitch"])
     raw = read_mosaic(directory / "raw.dng")
     truth = np.load(directory / "truth.npy")
