@@ -376,7 +376,9 @@ def _write_white(path, dn):
     ("packing", "packing"),
     ("rotation-with-white", "--rotation"),
     ("rotation-90", "within +-45 degrees"),
+    ("few-lenses", "too few lenses"),
 ])
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # nothing but the error line: numpy's warnings would be on stderr
 def test_cli_bad_input(tmp_path, cli, kind, words):
     rng = np.random.default_rng(1)
     white = tmp_path / "white.dng"
@@ -396,6 +398,8 @@ def test_cli_bad_input(tmp_path, cli, kind, words):
         args = ["--pitch", "9", "--sensor-shape", "576by576"]
     elif kind == "packing":
         args = ["--pitch", "9", "--sensor-shape", "90x90", "--packing", "triangle"]
+    elif kind == "few-lenses":  # 5x5 lenses: numpy's warnings on stderr came before the error line
+        _write_white(white, simulate_white("square", 8, 0.3, sensor_shape=(44, 44), vignetting=True).white)
     elif kind == "rotation-90":
         args = ["--pitch", "9", "--sensor-shape", "90x90", "--rotation", "90"]
     elif kind == "rotation-with-white":

@@ -448,9 +448,9 @@ def refine(norm: np.ndarray, rows: np.ndarray, cols: np.ndarray, grid: LensGrid,
         lens_n = ids_u % n_span + n_lo
         base_r, base_c = grid.lattice_point(lens_m, lens_n)
         cr, cc = base_r + d_r, base_c + d_c
-        weights = np.where(good, np.minimum(info / np.median(info[good]), 2.0), 0.0)
-        if good.sum() < 6:
+        if good.sum() < 6:  # before the median of the good ones (none: numpy warns on stderr)
             raise CalibrationError("no lenslet grid in the white image (too few lenses could be located)")
+        weights = np.where(good, np.minimum(info / np.median(info[good]), 2.0), 0.0)
         origin, a, b, keep, res = _fit_lattice(lens_m.astype(np.float64), lens_n.astype(np.float64), cr, cc,
                                                weights)
         new_grid = LensGrid.from_lattice(grid.packing, origin, a, b)
