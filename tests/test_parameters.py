@@ -99,6 +99,14 @@ def test_a_method_and_its_start_are_one_spelling(tmp_path):
         load_recipe(recipe)
     with pytest.raises(ValueError, match="unknown option 'start'"):
         pipeline_from_recipe("default", start="guarded")
+    # a recipe given as a dict is checked as a file is: a misspelt key is refused, not left to its default
+    with pytest.raises(ValueError, match="recipe given as a dict: unknown key 'metod'"):
+        pipeline_from_recipe({"metod": "malvar"})
+    with pytest.raises(ValueError, match="method = 'bogus'"):
+        pipeline_from_recipe({"method": "bogus"})
+    assert pipeline_from_recipe({"method": "malvar"}).options()["method"] == "malvar"
+    with pytest.raises(ValueError, match="give 'lam' or 'lambda', not both"):  # one value per option
+        pipeline_from_recipe("default", lam=0.1, **{"lambda": 0.2})
 
 
 def test_every_recipe_key_is_a_schema_field_and_a_click_option():

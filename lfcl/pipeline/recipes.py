@@ -100,8 +100,17 @@ def pipeline_from_recipe(recipe, **overrides):
 
     if not isinstance(recipe, dict):
         recipe = load_recipe(recipe)
+    else:  # checked as a file's keys are (a misspelt key would otherwise leave its default in silence)
+        named = {k: recipe[k] for k in ("name", "path") if k in recipe}
+        recipe = {**_check({k: v for k, v in recipe.items() if k not in ("name", "path")},
+                           f"recipe {named.get('name', 'given as a dict')}"), **named}
     fields = {e.name: e for e in entries()}
     recipe_key = {e.name: e.key for e in recipe_entries()}
+    both = sorted(name for name, key in recipe_key.items()
+                  if name != key and overrides.get(name) is not None and overrides.get(key) is not None)
+    if both:  # lam and lambda, fmt and format: one value each
+        raise ValueError(f"pipeline_from_recipe: give {', '.join(f'{n!r} or {recipe_key[n]!r}' for n in both)}, "
+                         "not both")
     given = {recipe_key.get(k, k): v for k, v in overrides.items() if v is not None}
     unknown = sorted(k for k in given if k not in DEFAULTS and k not in fields and k != "device")
     if unknown:
