@@ -132,6 +132,12 @@ def test_stage_contracts(capture, tmp_path):
         Outputs()(np.zeros((2, 2, 3, 3, 3)), tmp_path)
     with pytest.raises(ValueError, match="in that order"):
         Pipeline([Grid(), Decode(), Demosaic()])
+    with pytest.raises(ValueError, match="callback must be callable"):
+        Demosaic("admm-uv", callback=3)
+    with pytest.raises(ValueError, match="metadata must be a dict"):
+        Outputs(["center"], metadata=[1, 2])
+    with pytest.raises(ValueError, match="metadata must be plain JSON data"):
+        Outputs(["center"], metadata={"x": object()})
 
     # the stages one by one: what each returns
     mosaic = Decode()(capture)
@@ -141,6 +147,8 @@ def test_stage_contracts(capture, tmp_path):
     assert gridded.metadata["geometry"]["from"] == "--pitch"
     demosaiced = Demosaic("malvar")(gridded)
     assert isinstance(demosaiced, Demosaiced) and demosaiced.lightfield.shape == (12, 14, 9, 9, 3)
+    with pytest.raises(ValueError, match="takes an lfcl.depth.DisparityMap as its disparity"):
+        Demosaic("malvar")(gridded, disparity=np.zeros((12, 14)))
     with pytest.raises(ValueError, match="output folder"):
         Outputs()(demosaiced, None)
     written = Outputs(outputs=["lightfield"], previews=False)(demosaiced, tmp_path / "one")
@@ -279,6 +287,9 @@ def test_demosaic_refuses_an_unknown_grid_kind_and_finish_edits_the_summary(capt
     summary = pipeline.run(capture, tmp_path / "out", finish=finish)
     assert summary["note"] == "edited" and json.loads((tmp_path / "out" / "summary.json").read_text()) == summary
     assert summary["outputs"] == ["center.exr"] and summary["options"]["max_memory"] is None
+    with pytest.raises(ValueError, match="finish must return the summary"):  # it would be summary.json: null
+        pipeline.run(capture, tmp_path / "none", finish=lambda summary: None)
+    assert not (tmp_path / "none").exists()
 
 
 def test_a_recipe_run_judges_auto_on_its_outputs_as_process_does(capture, tmp_path):

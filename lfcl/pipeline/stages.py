@@ -288,6 +288,8 @@ class Demosaic:
                                 skip_flat=skip_flat, auto_view=auto_view, auto_costly=auto_costly,
                                 safety_net=safety_net))
         self.method, self.start = self.parameters.method_and_start  # METHOD[:START], apart
+        if callback is not None and not callable(callback):
+            raise ValueError(f"Demosaic: callback must be callable(record, x), got {type(callback).__name__}")
         self.device, self.callback = device, callback  # where it runs and who watches: not parameters
 
     def options(self) -> dict:
@@ -297,6 +299,10 @@ class Demosaic:
         """``disparity``: an ``lfcl.depth.DisparityMap`` already estimated from this raw (the depth output's,
         :func:`depth_of`); admm-epi takes it instead of estimating its own."""
         _need(gridded, Gridded, "Demosaic", "a Gridded (from Grid)")
+        if disparity is not None:
+            from ..depth import DisparityMap
+
+            _need(disparity, DisparityMap, "Demosaic", "an lfcl.depth.DisparityMap as its disparity (depth_of)")
         try:
             grid = gridded.grid
             grid.check_complete()
@@ -361,6 +367,15 @@ class Outputs:
                                 previews=previews))
         self.outputs = list(self.outputs)
         self.slopes = parse_slopes(self.refocus) if "refocus" in self.outputs else []
+        if metadata is not None and not isinstance(metadata, dict):
+            raise ValueError(f"Outputs: metadata must be a dict, got {type(metadata).__name__}")
+        if metadata:
+            from ..io.images import to_json
+
+            try:
+                to_json(metadata)  # every file's header holds it as JSON: refused now, not at the first write
+            except (TypeError, ValueError) as error:
+                raise ValueError(f"Outputs: metadata must be plain JSON data ({error})") from None
         self.metadata = dict(metadata or {})
 
     def options(self) -> dict:
@@ -534,7 +549,12 @@ class Pipeline:
 
         def done() -> dict:  # a fresh copy each time: ``finish`` may edit it
             out = {**summary, "seconds": dict(seconds)}
-            return finish(out) if finish is not None else out
+            if finish is None:
+                return out
+            out = finish(out)
+            if not isinstance(out, dict):  # it becomes summary.json
+                raise ValueError(f"Pipeline.run: finish must return the summary (a dict), returned {type(out).__name__}")
+            return out
 
         if outputs is None:
             return done()
