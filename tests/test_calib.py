@@ -421,7 +421,8 @@ def test_cli_never_writes_over_the_white_image_or_one_file_twice(tmp_path, cli):
                         ([str(white), "-o", str(tmp_path / "c.json"), "--export-centers", str(white)],
                          "is the white image"),
                         ([str(white), "-o", str(tmp_path / "c.json"), "--export-centers", str(tmp_path / "c.json")],
-                         "name the same file")):
+                         "name the same file"),
+                        ([str(white), "-o", str(tmp_path)], "is a folder: name the file to write")):
         result = CliRunner().invoke(cli, ["calibrate", *args])
         assert result.exit_code == 1 and words in result.output, result.output
         assert len(result.output.strip().splitlines()) == 1

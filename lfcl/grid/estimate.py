@@ -77,7 +77,7 @@ def _colour_gains(data: np.ndarray, pattern: str | None) -> tuple[np.ndarray, fl
     p99 = float(np.percentile(np.concatenate(list(phases.values())), 99))
     if not math.isfinite(p99) or p99 < DARK_LIMIT:
         raise CalibrationError(
-            f"the white image is too dark: 99 % of its pixels are below {max(p99, 0) * 100:.2f} % of full scale "
+            f"the white image is too dark: 99 % of its pixels are at or below {max(p99, 0) * 100:.2f} % of full scale "
             f"(need at least {DARK_LIMIT * 100:g} %; expose a flat white field at 50-90 %)")
     ncol = 1 if pattern is None else 3
     names = "RGB" if pattern else "Y"

@@ -75,6 +75,8 @@ def load_recipe(name_or_path) -> dict:
         text, where, name = resource.read_text(encoding="utf-8"), f"recipe {text_name}", text_name
         path_text = str(resource)
     else:
+        if path.is_dir():
+            raise ValueError(f"recipe {text_name!r} is a folder, not a .toml file")
         if not path.is_file():
             raise ValueError(f"recipe file {text_name!r} does not exist")
         text, where, name, path_text = path.read_text(encoding="utf-8"), f"recipe {text_name}", path.stem, str(path)

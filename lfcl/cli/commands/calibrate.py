@@ -38,6 +38,9 @@ def _check_paths(white, output, export_centers) -> None:
     if export_centers is not None and os.path.abspath(output) == os.path.abspath(export_centers):
         raise ValueError(f"-o and --export-centers name the same file, {output}: give two")
     for written in (output, export_centers):
+        if written is not None and os.path.isdir(written):
+            raise ValueError(f"{written} is a folder: name the file to write")
+    for written in (output, export_centers):
         if written is None or white is None:
             continue
         if os.path.abspath(written) == os.path.abspath(white) or (
