@@ -256,8 +256,8 @@ def dng_codes(image: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(image.astype(np.float64) * WHITE_LEVEL), 0, WHITE_LEVEL).astype(np.uint16)
 
 
-#: LibRaw (rawpy, darktable's and RawTherapee's reader) opens no raw narrower than this many pixels on a side
-#: ("Unsupported file format or not RAW file": 21x21-pixel DNGs failed, 22x22 opened, LibRaw 0.22).
+#: LibRaw (rawpy) opens no raw narrower than this many pixels on a side ("Unsupported file format or not RAW file":
+#: 21x21-pixel DNGs failed, 22x22 opened, LibRaw 0.22).
 MIN_DNG_SIDE = 22
 
 

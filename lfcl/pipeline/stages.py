@@ -386,8 +386,10 @@ class Outputs:
         than raw editors read (lfcl.io.linear_dng.MIN_DNG_SIDE lenses)."""
         from ..io.linear_dng import MIN_DNG_SIDE
 
+        if self.fmt != "dng":
+            return
         S, T = gridded.metadata["geometry"]["lenses"]
-        if self.fmt == "dng" and min(S, T) < MIN_DNG_SIDE:
+        if min(S, T) < MIN_DNG_SIDE:
             raise ValueError(f"--format dng: the views of {S}x{T} lenses would be DNGs that raw editors cannot open "
                              f"(LibRaw reads {MIN_DNG_SIDE} pixels a side at least): use --format exr or tiff")
 
