@@ -37,6 +37,11 @@ INSTALL_HINT = (
 _COMMON_SOURCE = "common"
 
 
+def memory_text(size: float) -> str:
+    """A memory size for messages: GiB from 1 GiB up, else MiB (0.0 GiB would tell a user nothing)."""
+    return f"{size / 2**30:.1f} GiB" if size >= 2**30 else f"{size / 2**20:.1f} MiB"
+
+
 class DeviceError(RuntimeError):
     """No usable OpenCL device, or the requested one does not exist."""
 

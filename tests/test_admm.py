@@ -166,6 +166,9 @@ def test_coupled_priors_say_why_they_cannot_run_in_bands(rng):
     b, _ = smooth_lightfield_mosaic(rng, 4, 4, 9, 9)
     with pytest.raises(ValueError, match="couples\\s+neighbouring lenses|couples neighbouring lenses"):
         demosaic_grid(b, "GRBG", AlignedGrid((9, 9)), "admm-st", iterations=2, max_memory=100_000)
+    # sizes a user can act on (a frame this small needed "0.0 GiB" of "0.0 GiB")
+    with pytest.raises(ValueError, match=r"needs about \d+\.\d MiB .* allows 0\.1 MiB"):
+        demosaic_grid(b, "GRBG", AlignedGrid((9, 9)), "admm-st", iterations=2, max_memory=100_000)
 
 
 def vignetting_weights(U, V, floor=0.0):

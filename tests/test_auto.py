@@ -322,3 +322,16 @@ def test_auto_runs_malvar_on_a_frame_too_small_for_the_priors(rng, shape):
     assert auto.method == record["method"] == "malvar" and record["sigma"] is None
     assert f"a frame of {S}x{T} lenses, fewer than 24 on a side" in record["reason"]
     np.testing.assert_array_equal(auto.planes, demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "malvar").planes)
+
+
+def test_a_skipped_costly_candidate_is_told_by_the_margin_rule():
+    # admm-epi gains more than the pick, but by less than the costly margin: the reason names that rule, not a tie
+    from lfcl.demosaic.auto_report import skipped_by_auto
+
+    rule = [{"sigma_from": 0.0, "sigma_to": 1.0, "candidate": "admm-uv-xc@1", "tie_db": 0.1, "captures": 30,
+             "costly_margin_db": 1.0,
+             "worst_gains_db": {"malvar": 0.0, "admm-uv-xc@1": 0.01, "admm-epi@1": 0.35, "admm-uv@1": 0.02},
+             "median_gains_db": {"malvar": 0.0, "admm-uv-xc@1": 1.29, "admm-epi@1": 2.75, "admm-uv@1": 1.0}}]
+    skipped = {s["output"]: s["reason"] for s in skipped_by_auto({"method": "admm-uv-xc", "sigma": 0.01}, rule)}
+    assert "beats the cheap pick's by 1 dB" in skipped["admm-epi@1"] and "ties" not in skipped["admm-epi@1"]
+    assert "ties within 0.1 dB go to the larger median" in skipped["admm-uv@1"]

@@ -272,6 +272,20 @@ def test_the_skip_is_off_by_default_and_needs_a_noise_model_when_asked_for(mixed
         demosaic_grid(one_lens, "GRBG", AlignedGrid((9, 9)), "admm-uv", lam=0.01, iterations=2, skip_flat=True)
 
 
+
+def test_auto_says_when_its_pick_ignores_skip_flat(rng):
+    # auto at low light picks admm-epi, which solves every lens: the asked --skip-flat is recorded as not applied
+    from lfcl.demosaic.flat_lenses import skipped_flat_lenses
+    from lfcl.noise.model import NoiseEstimate
+
+    mosaic = (0.3 + 0.0015 * rng.standard_normal((216, 216))).astype(np.float32)  # 24x24 lenses
+    noise = NoiseEstimate(gain=0.0, floor=0.0015**2, sigma=0.0015, source="test")
+    result = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "auto", noise=noise, skip_flat=True, iterations=1)
+    record = result.parameters["flat_lenses"]
+    assert result.method == "admm-epi" and record["ignored"] and "auto picked admm-epi" in record["why"]
+    (entry,) = skipped_flat_lenses(record)
+    assert entry["output"] == "--skip-flat" and entry["reason"] == record["why"]
+
 def test_the_benchmark_writes_one_row_per_capture_and_method(tmp_path):
     import flat  # research/flat.py
 

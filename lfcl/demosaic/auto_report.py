@@ -18,7 +18,7 @@ Example::
 
 from __future__ import annotations
 
-from .auto import band_for, load_rule
+from .auto import band_for, is_costly, load_rule
 
 
 def skipped_by_auto(auto: dict | None, rule=None) -> list[dict]:
@@ -47,9 +47,14 @@ def skipped_by_auto(auto: dict | None, rule=None) -> list[dict]:
             continue
         cost = (f", median {seconds[chosen]:.2f} s against {seconds[name]:.2f} s"
                 if chosen in seconds and name in seconds else "")
+        figures = (f"worst-case gain over Malvar {worst[chosen]:+.2f} dB against {worst[name]:+.2f} dB, median "
+                   f"{median.get(chosen, float('nan')):+.2f} dB against {median.get(name, float('nan')):+.2f} dB")
+        if is_costly(name) and not is_costly(chosen) and "costly_margin_db" in band:
+            why = (f"a costly method takes a band only where its worst case beats the cheap pick's by "
+                   f"{band['costly_margin_db']:g} dB, and darker bands where it is no worse")
+        else:
+            why = f"ties within {band['tie_db']:g} dB go to the larger median"
         skipped.append({"output": name, "stage": "demosaic",
-                        "reason": f"auto chose {chosen}: worst-case gain over Malvar {worst[chosen]:+.2f} dB against "
-                                  f"{worst[name]:+.2f} dB, median {median.get(chosen, float('nan')):+.2f} dB against "
-                                  f"{median.get(name, float('nan')):+.2f} dB (ties within {band['tie_db']:g} dB go to "
-                                  f"the larger median){cost} on {band['captures']} training captures"})
+                        "reason": f"auto chose {chosen}: {figures} ({why}){cost} on {band['captures']} training "
+                                  "captures"})
     return skipped

@@ -173,10 +173,15 @@ def demosaic_grid(mosaic: np.ndarray, pattern: str | None, grid, method: str, *,
         change_for_tolerance_db(tolerance_db)  # a bad tolerance: one line now, before any work
     mosaic = _checked_mosaic(mosaic, pattern, grid)
     auto = None
+    flat_ignored = None  # auto's pick does not skip flat lenses: the asked --skip-flat is recorded as not applied
     if method == "auto":
         auto = resolve_auto(mosaic, pattern, grid, noise=noise, view=auto_view, costly=auto_costly, device=device)
         method, strength, noise = auto.method, strength * auto.strength, auto.noise
         start = start if start is not None else auto.start
+        if skip_flat and method not in SKIPPABLE:
+            flat_ignored = {"flat_lenses": 0, "ignored": True,
+                            "why": f"not applied: auto picked {method}, which solves every lens (flat lenses are "
+                                   f"skipped by {', '.join(SKIPPABLE)})"}
         skip_flat = skip_flat if method in SKIPPABLE else None
     if aligned:
         result = solve_aligned(mosaic, pattern, grid.pitch, method, origin=grid.origin, lam=lam,
@@ -196,5 +201,7 @@ def demosaic_grid(mosaic: np.ndarray, pattern: str | None, grid, method: str, *,
         result = with_safety_net(result, mosaic, pattern, grid.pitch, grid.origin, grid.lens_response, device)
     if auto is not None:
         result.parameters = {**result.parameters, "auto": auto.record}
+    if flat_ignored is not None:
+        result.parameters = {**result.parameters, "flat_lenses": flat_ignored}
     result.device = device
     return result

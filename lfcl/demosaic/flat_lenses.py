@@ -181,6 +181,8 @@ def pack_lenses(active: np.ndarray) -> LensPacking:
 
 def skipped_flat_lenses(record: dict | None) -> list[dict]:
     """The ``skipped`` entry of `lfcl process` for ``parameters["flat_lenses"]`` ([] if none was skipped)."""
+    if record and record.get("ignored"):  # asked for, but the method auto picked solves every lens
+        return [{"output": "--skip-flat", "stage": "demosaic", "reason": record["why"]}]
     if not record or not record.get("flat_lenses"):
         return []
     return [{"output": f"ADMM on {record['flat_lenses']} of {record['lenses']} lenses", "stage": "demosaic",

@@ -37,7 +37,7 @@ import time
 
 import numpy as np
 
-from ..device import get_runtime
+from ..device import get_runtime, memory_text
 from ..grid.vignetting import flat_field
 from ..layout import LightFieldShape
 from ..noise.model import NoiseEstimate, estimate_noise
@@ -442,9 +442,9 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
             band_rows.append(rows.stop - rows.start)
     else:
         raise ValueError(
-            f"{method} on a {H}x{W} sensor needs about {needed / 2**30:.1f} GiB of device memory "
-            f"(largest buffer {largest / 2**30:.1f} GiB) but {runtime.name} allows {budget / 2**30:.1f} GiB "
-            f"(max allocation {runtime.device.max_mem_alloc_size / 2**30:.1f} GiB); its prior couples "
+            f"{method} on a {H}x{W} sensor needs about {memory_text(needed)} of device memory "
+            f"(largest buffer {memory_text(largest)}) but {runtime.name} allows {memory_text(budget)} "
+            f"(max allocation {memory_text(runtime.device.max_mem_alloc_size)}); its prior couples "
             "neighbouring lenses, so it does not run in bands: use admm-uv, a crop, or a larger device"
         )
     if planes_packed:  # the solved lenses back to their places, the flat ones to their means

@@ -172,13 +172,14 @@ def _finite(planes: np.ndarray, what: str, mosaic: np.ndarray) -> np.ndarray:
 
 
 def _check_memory(runtime, max_memory, n_pixels, nnz, shape, dims, method):
+    from ..device import memory_text
     from ..solvers.resampled import resampled_solver_bytes
 
     budget = int(max_memory) if max_memory is not None else int(0.8 * runtime.device.global_mem_size)
     needed = resampled_solver_bytes(n_pixels, nnz, (shape.S, shape.T, shape.U, shape.V), dims)
     largest = 4 * len(dims) * 3 * shape.S * shape.T * shape.U * shape.V
     if needed > budget or largest > runtime.device.max_mem_alloc_size:
-        raise ValueError(f"{method} on this {shape.S}x{shape.T}-lens grid needs about {needed / 2**30:.1f} GiB of "
-                         f"device memory (largest buffer {largest / 2**30:.1f} GiB) but {runtime.name} allows "
-                         f"{budget / 2**30:.1f} GiB: resampled grids do not run in bands yet; use a crop or a "
+        raise ValueError(f"{method} on this {shape.S}x{shape.T}-lens grid needs about {memory_text(needed)} of "
+                         f"device memory (largest buffer {memory_text(largest)}) but {runtime.name} allows "
+                         f"{memory_text(budget)}: resampled grids do not run in bands yet; use a crop or a "
                          "larger device")

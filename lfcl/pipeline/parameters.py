@@ -268,8 +268,8 @@ class DemosaicParameters(_Schema):
         help=f"Demosaic/denoise method ({', '.join(METHODS)}), optionally with the ADMM methods' first "
              f"estimate START ({', '.join(STARTS)}), as admm-uv-xc:guarded. auto: chosen from the raw's noise "
              "level, judged on --outputs (center alone: the centre view; mean/refocus alone: the mean image; else "
-             "both; docs/auto.md). START: malvar (the paper's, the default; with auto, the start its rule "
-             "names), linear4d (the learned 4D filter; gains on textured and multi-plane scenes), lens-malvar "
+             "both; docs/auto.md). START: malvar (the paper's, the default; admm-epi: its schedule's, guarded; "
+             "with auto, the start its rule names), linear4d (the learned 4D filter; gains on textured and multi-plane scenes), lens-malvar "
              "(Malvar bounded to each lens; gains on the mean image) or guarded (linear4d, with Malvar in the "
              "lenses where it breaks: high-contrast edges, clipped highlights), docs/auto.md.")
     lam: float | None = param(
@@ -277,7 +277,8 @@ class DemosaicParameters(_Schema):
         help="TV weight; default: follows the noise level estimated from the raw (docs/admm.md).")
     iterations: int | None = param(
         None, kind=int, bounds=Bounds(1), recipe=4,
-        help="Run exactly this many ADMM iterations; default: the method's early-stopping rule.")
+        help="Run exactly this many ADMM iterations (from the Malvar start the first leaves x as it is: z = D x, "
+             "u = 0); default: the method's early-stopping rule.")
     strength: float = param(1.0, kind=float, bounds=Bounds(0, low_open=True), recipe=2,
                             help="Multiplier on the default lambda.")
     tolerance_db: float | None = param(
@@ -287,8 +288,9 @@ class DemosaicParameters(_Schema):
     max_memory: int | None = param(
         None, kind=int, bounds=Bounds(1), cli_kind=float, cli_bounds=Bounds(0.01), cli_scale=2**30, metavar="GIB",
         help="Device memory the solver may use, GiB; default 80% of the device's (admm-epi on a CPU "
-             "device: at most 2). A larger admm-uv problem runs in bands of lens rows (exact: the (u, v) "
-             "prior couples no two lenses), a larger admm-epi one in bands with a halo of lens rows.")
+             "device: at most 2). A larger admm-uv problem runs in bands of lens rows (the (u, v) prior couples no "
+             "two lenses: with --iterations exactly the whole frame's result; with the default stop each band "
+             "stops on its own), a larger admm-epi one in bands with a halo of lens rows.")
     skip_flat: bool | float | None = param(  # measured: off by default, so hidden
         None, cli_kind=bool, flag="--skip-flat/--solve-flat", hidden=True,
         help="Flat lenses (constant per colour within the noise: a chi-square test against the raw's "
