@@ -157,6 +157,11 @@ def test_admm_uv_in_bands_of_lens_rows_equals_the_whole(rng):
     assert "bands of lens rows" in bands.stop_reason and "bands" not in whole.stop_reason
     assert len({h["band"] for h in bands.history}) > 2
     np.testing.assert_allclose(bands.planes, whole.planes, rtol=0, atol=2e-6)
+    # recorded as admm-epi records its bands (a user cannot tell them from the stop reason alone)
+    record = bands.parameters["bands"]
+    assert sum(record["rows"]) == b.shape[0] and len(record["rows"]) > 2
+    assert record["iterations"] == [6] * len(record["rows"])
+    assert "bands" not in whole.parameters and " 6 iterations" in bands.stop_reason  # not "6-6"
 
 
 def test_coupled_priors_say_why_they_cannot_run_in_bands(rng):

@@ -461,5 +461,8 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
         parameters["flat_lenses"] = found.as_dict(packing.grid[0] if packing is not None else None)
     elif dims == "uv":
         parameters["flat_lenses"] = {"flat_lenses": 0, "why": flat_why}
+    if len(runs) > 1:  # as admm-epi records its own: each band stops on its own rule
+        parameters["bands"] = {"rows": list(band_rows), "iterations": [run.iterations for run in runs],
+                               "rows_are": "mosaic rows each band solved (of the packed mosaic with --skip-flat)"}
     return DemosaicResult(planes, method, parameters, banded.iterations, time.perf_counter() - began, reason,
                           banded.history_rows(), noise)

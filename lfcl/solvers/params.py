@@ -121,7 +121,8 @@ class BandedResult:
         if len(self.runs) == 1:
             return self.runs[0].stop_reason
         counts = [run.iterations for run in self.runs]
-        return (f"{len(self.runs)} bands of lens rows, {min(counts)}-{max(counts)} iterations (mean over lens rows "
+        spread = f"{min(counts)}" if min(counts) == max(counts) else f"{min(counts)}-{max(counts)}"
+        return (f"{len(self.runs)} bands of lens rows, {spread} iterations (mean over lens rows "
                 f"{np.average(counts, weights=self.band_rows):.1f}), each stopped by its own rule "
                 f"(last band: {self.runs[-1].stop_reason})")
 
