@@ -311,10 +311,10 @@ def test_auto_without_linear4d_coefficients_for_the_pitch_runs_from_malvar(rng, 
 def test_auto_runs_malvar_on_a_frame_too_small_for_the_priors(rng, shape):
     # Fewer lenses on a side than twice admm-epi's halo: most lenses lie at the frame's edge, where the priors lost to
     # Malvar (docs/auto.md, "Small frames"). Decided before any noise estimate (a 1x1-lens raw allows none).
-    from lfcl.demosaic.auto import PRIOR_DMAX, min_lenses
+    from lfcl.demosaic.auto import min_lenses, prior_dmax
     from lfcl.solvers.epi import epi_halo
 
-    assert min_lenses((9, 9)) == 2 * epi_halo([PRIOR_DMAX], (9, 9)) == 24
+    assert min_lenses((9, 9)) == 2 * epi_halo([prior_dmax()], (9, 9)) == 24
     S, T = shape
     mosaic = (0.3 + 0.02 * rng.standard_normal((9 * S, 9 * T))).astype(np.float32)
     auto = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "auto")

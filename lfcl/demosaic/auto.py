@@ -44,9 +44,6 @@ RULE_FILE = "auto_rule.json"
 #: on a pitch without coefficients, a method a resampled grid lacks): the method that gained
 #: over malvar on every setting measured (docs/admm.md, docs/geometry.md), at strength 1.
 AUTO_FALLBACK = "admm-uv"
-#: The widest disparity admm-epi searches (lfcl.depth.estimate DEFAULTS["dmax"], lenses per view step): with its pitch
-#: it sets how far the prior's lines reach, hence :func:`min_lenses`.
-PRIOR_DMAX = 2.0
 #: What a rule's losses are judged on: the worse of the centre view and the mean image, or one of them.
 VIEWS = ("both", "center", "mean")
 VIEW_WORDS = {"both": "centre view or mean image, whichever is worse", "center": "centre view",
@@ -346,14 +343,23 @@ def for_pitch(choice: AutoChoice, pitch) -> tuple[AutoChoice, dict | None]:
 
 def min_lenses(pitch) -> int:
     """The fewest lenses on a side of a frame on which ``auto`` runs a prior: twice the halo of admm-epi's bands
-    (lfcl.solvers.epi.epi_halo at :data:`PRIOR_DMAX`: how far its lines and their interpolation reach; 12 lenses at
+    (lfcl.solvers.epi.epi_halo at :func:`prior_dmax`: how far its lines and their interpolation reach; 12 lenses at
     pitch 9). On a narrower frame most lenses lie that close to its edge, where the lines leave the frame; there the
     default lost to Malvar (4-12 lenses a side at pitch 9: down to -10 dB at 4, -0.76 at 10, -0.23 at 12; the cheaper
     methods too, admm-uv-xc down to -1.6 dB at 4 and -2.9 at 12 with the noise estimated from the raw), and not at 24
     (docs/auto.md, "Small frames"), so ``auto`` runs Malvar there."""
     from ..solvers.epi import epi_halo
 
-    return 2 * epi_halo([PRIOR_DMAX], pitch)
+    return 2 * epi_halo([prior_dmax()], pitch)
+
+
+def prior_dmax() -> float:
+    """The widest disparity admm-epi searches (lenses per view step; lfcl.depth.estimate's default unless
+    lfcl.solvers.epi.EPI_DEPTH_OPTIONS says otherwise): with the pitch it sets how far the prior's lines reach."""
+    from ..depth.estimate import DEFAULTS
+    from ..solvers.epi import EPI_DEPTH_OPTIONS
+
+    return float({**DEFAULTS, **EPI_DEPTH_OPTIONS}["dmax"])
 
 
 def small_frame(lenses, pitch) -> AutoChoice | None:
