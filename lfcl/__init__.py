@@ -45,11 +45,11 @@ def read_raw(path, pattern: str | None = None):
     Raises
     ------
     ValueError
-        An unreadable or unsupported file, or an image mosaic without ``pattern``.
+        A file that does not exist, an unreadable or unsupported one, or an image mosaic without ``pattern``.
     """
-    from .io.raw import read_mosaic
+    from .pipeline.stages import Decode
 
-    return read_mosaic(path, pattern)
+    return Decode(pattern)(path)  # the pipeline's own stage: the same checks and errors as lfcl.lightfield's
 
 
 def lightfield(raw, *, pitch: int | None = None, calibration=None, white=None, pattern: str | None = None,

@@ -415,6 +415,7 @@ def test_public_function_matches_numpy_with_a_given_noise(runtime):
     coefficients = select_coefficients(model, 0.004 / float(mosaic.astype(np.float64).mean()))
     want = linear4d_np(mosaic, "GBRG", (9, 9), model.taps, coefficients, (1, 0))
     np.testing.assert_allclose(got, want, rtol=0, atol=2e-5 * float(np.abs(want).max()))
+    np.testing.assert_array_equal(linear4d(runtime, mosaic, "GBRG", 9, origin=(1, 0), noise=noise), got)  # 9: 9x9
 
 
 def test_demosaic_lightfield_runs_linear4d(runtime):

@@ -95,6 +95,9 @@ def test_the_public_api_demosaics_to_the_exchange_layout_and_processes_a_file(tm
     folder = write_capture(capture, tmp_path / "cap")
     raw = lfcl.read_raw(folder / "raw.dng")
     assert raw.pattern == capture.pattern and raw.data.shape == mosaic.shape
+    for call in (lfcl.read_raw, lfcl.lightfield):  # a missing file is a user's error like any other: ValueError
+        with pytest.raises(ValueError, match="nothere.dng' does not exist"):
+            call(str(tmp_path / "nothere.dng"))
     summary = lfcl.process(folder / "raw.dng", tmp_path / "out", "preview", pitch=9)
     assert summary["method"] == "malvar" and json.loads((tmp_path / "out" / "summary.json").read_text())["method"] == \
         "malvar"

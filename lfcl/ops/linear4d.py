@@ -387,7 +387,7 @@ def linear4d_operator(runtime, mosaic, pattern: str, pitch, origin=(0, 0), noise
     from ..noise.model import estimate_noise
 
     model = model if model is not None else load_model()
-    pitch = tuple(int(p) for p in pitch)
+    pitch = (int(pitch), int(pitch)) if np.isscalar(pitch) else tuple(int(p) for p in pitch)  # 9 means 9x9
     if pitch != tuple(model.pitch):
         raise ValueError(f"the linear4d coefficients were fitted for {model.pitch[0]}x{model.pitch[1]} lenses, "
                          f"not {pitch[0]}x{pitch[1]}: refit with python research/fit_linear4d.py --pitch")

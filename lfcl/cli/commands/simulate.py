@@ -21,7 +21,7 @@ from . import user_errors
               help="An existing light field instead of a scene: a folder of HCI views input_Cam000.png... "
                    "(row-major over u, v) or a .npy [S, T, U, V, 3]; its own S, T, U, V are used.")
 @click.option("--lenses", default=None, metavar="SxT", show_default="64x64, or the light field's own size",
-              help="Microlens array size; with --lightfield, a smaller size crops the centre.")
+              help="Microlens array size (N alone: NxN); with --lightfield, a smaller size crops the centre.")
 @click.option("--pitch", type=float, default=None, show_default="9",
               help="Pixels per microlens: an integer for the aligned grid (U = V); any value >= 2 with --grid.")
 @click.option("--pattern", default="GRBG", show_default=True, help="Bayer pattern: RGGB, GRBG, GBRG or BGGR.")
