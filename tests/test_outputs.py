@@ -110,6 +110,44 @@ def test_write_is_all_or_nothing(lightfield, tmp_path, monkeypatch):
     assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
 
 
+@pytest.mark.parametrize("where", ["after the temporary file is made", "after the rename"])
+def test_an_interrupt_anywhere_in_a_write_leaves_nothing(lightfield, tmp_path, monkeypatch, where):
+    """Ctrl-C lands between any two bytecodes: between mkstemp and the guarded block, or after a file's rename
+    but before write_outputs records it. Neither leaves a file behind (an audit saw both)."""
+    import lfcl.io.images
+    import lfcl.outputs.files
+
+    plan = plan_outputs(lightfield, ["center", "mean", "views"], previews=True)
+    count = []
+    if where == "after the temporary file is made":
+        real_close = lfcl.io.images.os.close
+
+        def close(fd):
+            real_close(fd)
+            count.append(fd)
+            if len(count) == 3:
+                raise KeyboardInterrupt
+
+        monkeypatch.setattr(lfcl.io.images.os, "close", close)
+    else:
+        real_one = lfcl.outputs.files._write_one
+
+        def write_one(out_dir, f):
+            path = real_one(out_dir, f)
+            count.append(path)
+            if len(count) == 3:
+                raise KeyboardInterrupt
+            return path
+
+        monkeypatch.setattr(lfcl.outputs.files, "_write_one", write_one)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "keep.txt").write_text("x")
+    with pytest.raises(KeyboardInterrupt):
+        write_outputs(out, plan.files)
+    assert len(count) == 3 and sorted(p.name for p in out.iterdir()) == ["keep.txt"]
+
+
 # --------------------------------------------------------------------------- the CLI
 
 @pytest.fixture(scope="module")

@@ -242,6 +242,9 @@ def write_outputs(out_dir, files, seconds: dict | None = None, inputs=()) -> lis
         created.append(parent)
     written: list[Path] = []
     seconds = {} if seconds is None else seconds
+    # What the folder held before: on failure, whatever this call added goes, wherever an interrupt (Ctrl-C)
+    # landed, between a temporary file's making and its rename or between a rename and its bookkeeping
+    before = set(os.listdir(out_dir)) if out_dir.is_dir() else set()
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
         for f in files:
@@ -249,11 +252,21 @@ def write_outputs(out_dir, files, seconds: dict | None = None, inputs=()) -> lis
             written.append(_write_one(out_dir, f))
             seconds[f.kind] = seconds.get(f.kind, 0.0) + time.perf_counter() - start
     except BaseException:
-        for path in written:
-            with contextlib.suppress(OSError):
-                path.unlink()
+        _remove_added(out_dir, files, before)
         for folder in created:  # innermost first
             with contextlib.suppress(OSError):
                 folder.rmdir()
         raise
     return written
+
+
+def _remove_added(out_dir: Path, files, before: set) -> None:
+    """Remove from ``out_dir`` the planned files and their temporary files (``.STEM.*``, lfcl.io.images.atomic_path)
+    that were not there in ``before``; a file that was there and is now replaced stays replaced (docs/outputs.md)."""
+    names = {f.name for f in files}
+    stems = tuple(f".{Path(name).stem}." for name in names)
+    with contextlib.suppress(OSError):
+        for name in set(os.listdir(out_dir)) - before:
+            if name in names or name.startswith(stems):
+                with contextlib.suppress(OSError):
+                    (out_dir / name).unlink()
