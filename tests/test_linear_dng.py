@@ -140,6 +140,12 @@ def test_carries_a_dngs_second_matrix_and_forward_matrices(tmp_path):
         np.testing.assert_allclose(floats(tags[code]), want, atol=1e-4, err_msg=COLOUR_TAGS[code][0])
     assert tags[50778] == 17 and tags[50779] == 21
     assert tags[271] == "Canon" and tags[50708] == "Canon EOS 5D Mark II test"
+    # a BaselineExposure of 0/0 (as a real DNG of ../shared holds) drops that tag alone, not the camera's names
+    extra[-2] = (50730, 10, 1, (0, 0), True)
+    tifffile.imwrite(str(path), mosaic, photometric=32803, metadata=None, subfiletype=0, extratags=base + extra)
+    camera = DngCamera.from_mosaic(read_mosaic(path))
+    assert camera.make == "Canon" and 50730 not in camera.colour
+    np.testing.assert_allclose(camera.colour[50722], cm2, atol=1e-4)
 
 
 def test_camera_from_libraw_metadata_and_without_any():
@@ -247,3 +253,15 @@ def test_rawtherapee_renders_it(canon, tmp_path):
                          timeout=120, env={**os.environ, "HOME": str(tmp_path)})
     assert run.returncode == 0 and out.exists(), run.stdout[-2000:] + run.stderr[-2000:]
     check_render(read_png(out), "RawTherapee")
+
+
+def test_a_real_dng_keeps_its_camera_names_and_colour_tags():
+    """tinydng's colorchart.dng holds a BaselineExposure of 0/0: its Make, UniqueCameraModel, ColorMatrix1 and
+    AnalogBalance still reach the LinearRaw DNG (they were all replaced by LibRaw's before)."""
+    from conftest import shared_path
+
+    from lfcl.io.raw import read_mosaic
+
+    camera = DngCamera.from_mosaic(read_mosaic(shared_path("realdata", "tinydng", "colorchart.dng")))
+    assert (camera.make, camera.unique_model) == ("Canon", "Canon EOS Kiss X4")
+    assert {50721, 50727, 50728} <= set(camera.colour) and "as they were" in camera.source

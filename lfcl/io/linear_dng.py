@@ -98,7 +98,8 @@ def _floats(tag_value, tag_type: int) -> tuple[float, ...]:
     if tag_type in (RATIONAL, SRATIONAL):
         if len(values) % 2:
             raise ValueError("odd rational")
-        return tuple(values[i] / values[i + 1] for i in range(0, len(values), 2))
+        # x/0 (real DNGs hold a BaselineExposure of 0/0): NaN, so that tag alone is left out, not every tag
+        return tuple(values[i] / values[i + 1] if values[i + 1] else float("nan") for i in range(0, len(values), 2))
     return tuple(float(v) for v in values)
 
 
