@@ -120,11 +120,14 @@ def test_unchanged_captures_are_skipped_and_changed_options_redone(first_batch, 
     assert all(results[n]["status"] == "skipped" and results[n]["reason"] == "unchanged" for n in GOOD)
     assert (lightfield.stat().st_ino, lightfield.stat().st_mtime_ns) == before[:2]
 
+    (out / "cap0" / "center.exr.xmp").write_text("an editor's sidecar")  # not lfcl's: a redo keeps it
     result = batch(captures / "cap0.dng", "-o", out, "--scheduler", address, *FAST, "--strength", "3", "--json")
     assert result.exit_code == 0, result.output
     (changed,) = json.loads(result.stdout)["captures"]
     assert changed["status"] == "done" and changed["reason"] == "redone: options changed"
     assert lightfield.read_bytes() != before[2]
+    assert (out / "cap0" / "center.exr.xmp").read_text() == "an editor's sidecar"
+    assert "center.exr.xmp" not in json.loads((out / "cap0" / RECORD).read_text())["files"]
     assert json.loads((out / "cap0" / "summary.json").read_text())["options"]["strength"] == 3.0
     # --resume trusts complete outputs, but not ones made with other options
     result = batch(captures / "cap0.dng", "-o", out, "--scheduler", address, *FAST, "--resume", "--json")
@@ -210,6 +213,16 @@ def test_inputs_and_names(tmp_path):
         expand_inputs([tmp_path / "nope.dng"])
     with pytest.raises(ValueError, match="matches no capture"):
         expand_inputs([tmp_path / "*.cr2"])
+    # a ** glob over a folder that holds the batch's own output folder: nothing of the outputs is a capture
+    (tmp_path / "b/out/x").mkdir(parents=True)
+    (tmp_path / "b/out/x/center.tif").write_bytes(b"x")
+    found = expand_inputs([tmp_path / "b/**"], exclude=[tmp_path / "b/white.dng"], out_dir=tmp_path / "b/out")
+    assert [p.name for p in found] == ["x.dng", "x.tif"]
+    (tmp_path / "b/QT100.QTK").write_bytes(b"x")  # QuickTake: LibRaw reads it
+    assert "QT100.QTK" in [p.name for p in expand_inputs([tmp_path / "b"])]
+    for name in ("lfcl-batch-summary.json.dng", ".lfcl-batch.lock.dng"):  # OUTDIR's own files
+        with pytest.raises(ValueError, match="the batch's own file: rename it"):
+            capture_names([tmp_path / name])
 
 
 def test_bad_options_fail_before_any_work(captures, tmp_path):

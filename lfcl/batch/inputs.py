@@ -16,12 +16,13 @@ from pathlib import Path
 from typing import NamedTuple
 
 from ..io.raw import IMAGE_EXTENSIONS
+from .record import LOCK, SUMMARY
 
 #: Camera raw formats LibRaw reads (DNG included), by extension.
 RAW_EXTENSIONS = frozenset({
     ".dng", ".3fr", ".ari", ".arw", ".bay", ".cap", ".cr2", ".cr3", ".crw", ".dcr", ".dcs", ".drf", ".eip",
     ".erf", ".fff", ".gpr", ".iiq", ".k25", ".kdc", ".mdc", ".mef", ".mos", ".mrw", ".nef", ".nrw", ".orf",
-    ".pef", ".ptx", ".pxn", ".r3d", ".raf", ".raw", ".rw2", ".rwl", ".rwz", ".sr2", ".srf", ".srw", ".x3f",
+    ".pef", ".ptx", ".pxn", ".qtk", ".r3d", ".raf", ".raw", ".rw2", ".rwl", ".rwz", ".sr2", ".srf", ".srw", ".x3f",
 })
 #: What a folder or a glob contributes: camera raws and the mosaic image files lfcl reads.
 CAPTURE_EXTENSIONS = RAW_EXTENSIONS | IMAGE_EXTENSIONS
@@ -45,14 +46,17 @@ def _folder(path: Path) -> list[Path]:
     return [p for p in entries if _is_capture(p)]
 
 
-def expand_inputs(inputs, exclude=()) -> list[Path]:
+def expand_inputs(inputs, exclude=(), out_dir=None) -> list[Path]:
     """Files, folders and globs -> absolute paths of the captures, in the order given, each once.
 
-    ``exclude``: files never taken from a folder or glob (the calibration or white image).
+    ``exclude``: files never taken from a folder or glob (the calibration or white image); nor is anything
+    inside ``out_dir``, the batch's own output folder (a ``**`` glob over a folder that holds it would take
+    the batch's outputs as captures on its next run).
     One-line ``ValueError`` for an input that does not exist, a glob or folder without
     captures, or no captures at all.
     """
     skip = {Path(p).resolve() for p in exclude if p is not None}
+    outputs = Path(out_dir).resolve() if out_dir is not None else None
     found: list[Path] = []
     for text in map(str, inputs):
         if any(c in text for c in _GLOB_CHARS) and not Path(text).exists():
@@ -71,7 +75,8 @@ def expand_inputs(inputs, exclude=()) -> list[Path]:
             else:
                 found.append(path.resolve())  # a file named explicitly: taken whatever it is
                 continue
-        found.extend(p.resolve() for p in paths if p.resolve() not in skip)
+        found.extend(p.resolve() for p in paths
+                     if p.resolve() not in skip and not (outputs and p.resolve().is_relative_to(outputs)))
     unique = list(dict.fromkeys(found))
     if not unique:
         raise ValueError("no captures to process")
@@ -99,6 +104,10 @@ def capture_names(paths) -> list[Capture]:
             a, b = (str(paths[i]) for i in members[:2])
             raise ValueError(f"captures {a!r} and {b!r} would share the output folder {paths[members[0]].stem!r}: "
                              "rename one or run them in separate batches")
+    reserved = {SUMMARY.casefold(), LOCK.casefold()}
+    for name, path in zip(names, paths):
+        if name.casefold() in reserved:
+            raise ValueError(f"capture {str(path)!r} would be written to {name!r}, the batch's own file: rename it")
     seen: dict[str, int] = {}
     for i, name in enumerate(names):
         j = seen.setdefault(name.casefold(), i)

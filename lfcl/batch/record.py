@@ -24,6 +24,8 @@ from pathlib import Path
 
 RECORD = "lfcl-batch.json"
 LOCK = ".lfcl-batch.lock"
+#: The batch's summary in OUTDIR (lfcl/cli/commands/batch.py); no capture may take its name, nor LOCK's.
+SUMMARY = "lfcl-batch-summary.json"
 #: Temporary folders beside the captures' folders: one being written, one being replaced.
 PARTIAL, OLD = "lfcl-partial", "lfcl-old"
 
@@ -134,14 +136,34 @@ def publish(tmp: Path, final: Path) -> None:
 
     Two renames (a folder cannot be renamed onto a non-empty one): ``final`` aside, then
     ``tmp`` in. Interrupted between them, ``final`` is missing and the next run redoes it.
+    The files of ``final`` that its record does not list (an editor's sidecars, a user's notes)
+    move into the new folder first: a redo replaces what lfcl batch wrote, nothing else.
     """
     if final.exists():
+        _carry_others(final, tmp)
         old = final.parent / f".{final.name}.{OLD}-{uuid.uuid4().hex[:12]}"
         os.rename(final, old)
         os.rename(tmp, final)
         shutil.rmtree(old, ignore_errors=True)
     else:
         os.rename(tmp, final)
+
+
+def _carry_others(final: Path, tmp: Path) -> None:
+    """Move into ``tmp`` every entry of ``final`` that ``final``'s record does not list; a one-line ``ValueError``,
+    before anything moves, if the new output has one of their names. Without a readable record nothing is
+    known to be another's, so nothing moves (such a folder is lfcl's, incomplete: folder_state)."""
+    try:
+        ours = set(json.loads((final / RECORD).read_text())["files"]) | {RECORD}
+    except (OSError, ValueError, KeyError, TypeError):
+        return
+    others = [p for p in sorted(final.iterdir()) if p.name not in ours]
+    for p in others:
+        if (tmp / p.name).exists() or (tmp / p.name).is_symlink():
+            raise ValueError(f"{p} was not written by lfcl batch, and the new output writes a file of that name: "
+                             "move it away")
+    for p in others:
+        os.rename(p, tmp / p.name)
 
 
 def remove_leftovers(out_dir: Path) -> list[str]:

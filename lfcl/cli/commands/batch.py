@@ -16,10 +16,10 @@ from pathlib import Path
 
 import click
 
+from ...batch.record import SUMMARY
 from . import PROCESS_SECTIONS, SectionedCommand, user_errors
 from .process import DEFAULT_PITCH, process_options, settings_from_options
 
-SUMMARY = "lfcl-batch-summary.json"
 #: Up to this many captures the summary lists each; above, the failed ones only.
 LIST_ALL = 20
 
@@ -69,8 +69,8 @@ def _run(cluster, jobs: list, as_json: bool) -> list:
                           "seconds": 0.0, "host": None, "pid": None, "runtime": None, "compute_units": None}
             counts[result["status"]] += 1
             results.append(result)
+            bar.set_postfix(counts, refresh=False)  # before the update, which draws the bar with it
             bar.update(1)
-            bar.set_postfix(counts, refresh=False)
     order = {job["name"]: i for i, job in enumerate(jobs)}
     return sorted(results, key=lambda r: order[r["name"]])
 
@@ -130,8 +130,8 @@ def command(inputs, out_dir, scheduler, workers, resume, as_json, **options):
         if options[key] is not None:
             options[key] = Path(options[key]).resolve()
     settings = settings_from_options(options)
-    captures = capture_names(expand_inputs(inputs, exclude=(settings.calibration, settings.white)))
     out_dir = out_dir.resolve()
+    captures = capture_names(expand_inputs(inputs, exclude=(settings.calibration, settings.white), out_dir=out_dir))
     out_dir.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     lock = BatchLock(out_dir, resume)
