@@ -3,6 +3,7 @@ runtime per worker, byte equality with `lfcl process`, skips, redos, an interrup
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -197,6 +198,32 @@ def test_an_interrupted_batch_resumes(captures, tmp_path):
     assert sorted(p.name for p in out.iterdir()) == sorted([*GOOD, "lfcl-batch-summary.json"])
 
 
+def test_ctrl_c_stops_a_local_batch_quietly(captures, tmp_path):
+    """SIGINT to the batch's whole process group, as a terminal's Ctrl-C sends it: the batch stops with the lock
+    released, no summary of an earlier run left describing the folder, and no worker's traceback on stderr."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "lfcl-batch-summary.json").write_text("{}")  # an earlier run's
+    code = "import sys; from lfcl.cli import main; sys.argv[0] = 'lfcl'; main()"
+    proc = subprocess.Popen([sys.executable, "-c", code, "batch", str(captures), "-o", str(out), "--workers", "2",
+                             "--iterations", "200"], start_new_session=True, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, cwd=tmp_path)
+    try:
+        deadline = time.monotonic() + 120
+        while not _complete(out) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert proc.returncode != 0
+    assert _group_gone(proc.pid), "processes of the interrupted batch are still alive"
+    assert "Traceback" not in stderr.decode(), stderr.decode()[-2000:]
+    assert not (out / LOCK).exists() and not (out / "lfcl-batch-summary.json").exists()
+
+
 def test_inputs_and_names(tmp_path):
     for sub in ("a/c0", "a/c1", "b"):
         (tmp_path / sub).mkdir(parents=True)
@@ -229,10 +256,18 @@ def test_bad_options_fail_before_any_work(captures, tmp_path):
     out = tmp_path / "out"
     for args, message in ((["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers sizes"),
                           (["--outputs", "center,nope"], "unknown outputs nope"),
-                          (["--pitch", "9", "--white", captures / "cap0.dng"], "give the lens grid once")):
+                          (["--pitch", "9", "--white", captures / "cap0.dng"], "give the lens grid once"),
+                          (["--device", "99"], "device index 99 does not exist")):
         result = batch(captures, "-o", out, *args)
         assert result.exit_code == 1 and message in result.output, result.output
         assert len(result.output.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_a_batch_that_cannot_reach_its_scheduler_leaves_no_outdir(captures, tmp_path):
+    out = tmp_path / "new" / "out"
+    result = batch(captures, "-o", out, "--scheduler", "tcp://127.0.0.1:1")
+    assert result.exit_code == 1 and "cannot reach the Dask scheduler" in result.output
+    assert not (tmp_path / "new").exists()
 
 
 def test_a_stale_lock_needs_resume(tmp_path):

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
+import threading
 from typing import NamedTuple
 
 #: Memory a local worker is given room for (the default worker count keeps to RAM / this).
@@ -60,8 +62,17 @@ def open_cluster(scheduler: str | None, workers: int | None) -> Cluster:
         local = None
     else:
         workers, pocl_threads = local_size(workers)
-        local = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                             dashboard_address=":0", silence_logs=logging.ERROR)
+        # The worker processes start with SIGINT ignored (Python keeps an inherited SIG_IGN): Ctrl-C in a terminal
+        # reaches the whole process group, and the workers would each print a KeyboardInterrupt traceback; this
+        # process takes it alone and closes the cluster, which ends them
+        main_thread = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main_thread else None
+        try:
+            local = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                 dashboard_address=":0", silence_logs=logging.ERROR)
+        finally:
+            if main_thread:
+                signal.signal(signal.SIGINT, previous)
         client = Client(local)
     return Cluster(client, local, len(client.nthreads()), pocl_threads, _dashboard(client))
 

@@ -10,6 +10,8 @@ the summary lists every capture, and the exit code is 1 when any failed.
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import sys
 import time
 from pathlib import Path
@@ -122,7 +124,6 @@ def command(inputs, out_dir, scheduler, workers, resume, as_json, **options):
     """Process many lenslet raws (files, folders, globs) like `lfcl process`, on Dask; resumable."""
     _need_dask()
     from ...batch.inputs import capture_names, expand_inputs
-    from ...batch.record import BatchLock, digest, remove_leftovers, settings_identity
 
     if scheduler is not None and workers is not None:
         raise ValueError("--workers sizes the local cluster; with --scheduler the cluster has its own workers")
@@ -132,34 +133,20 @@ def command(inputs, out_dir, scheduler, workers, resume, as_json, **options):
     settings = settings_from_options(options)
     out_dir = out_dir.resolve()
     captures = capture_names(expand_inputs(inputs, exclude=(settings.calibration, settings.white), out_dir=out_dir))
-    out_dir.mkdir(parents=True, exist_ok=True)
-    start = time.perf_counter()
-    lock = BatchLock(out_dir, resume)
-    release = True
-    try:
-        leftovers = remove_leftovers(out_dir)
-        identity = settings_identity(settings)
-        key = digest(identity)
-        jobs = [{"name": c.name, "input": c.path, "out_dir": str(out_dir), "settings": settings, "settings_key": key,
-                 "identity": identity, "resume": resume} for c in captures]
-        from ...batch.cluster import open_cluster
+    if scheduler is None and settings.device is not None:  # local workers see this machine's devices
+        from ...device import select_device
 
-        cluster = open_cluster(scheduler, workers)
-        try:
-            where = scheduler or (f"a local cluster of {cluster.workers} worker process"
-                                  f"{'' if cluster.workers == 1 else 'es'}, POCL_MAX_PTHREAD_COUNT={cluster.pocl_threads}")
-            click.echo(f"lfcl batch: {_count(len(jobs), 'capture')} on {where}", err=True)
-            if cluster.dashboard:
-                click.echo(f"dashboard: {cluster.dashboard}", err=True)
-            results = _run(cluster, jobs, as_json)
-        except KeyboardInterrupt:
-            release = scheduler is None  # a remote cluster may still run tasks: leave the lock (--resume)
-            raise
-        finally:
-            cluster.close()
-    finally:
-        if release:
-            lock.release()
+        select_device(settings.device)
+    made = [p for p in (out_dir, *out_dir.parents) if not p.exists()]  # innermost first
+    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        results, cluster, lock, start, leftovers, key, identity = _batch(out_dir, captures, settings, scheduler,
+                                                                         workers, resume, as_json)
+    except BaseException:
+        for folder in made:  # a batch that failed before it wrote anything leaves no empty OUTDIR behind
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
     counts = {s: sum(r["status"] == s for r in results) for s in ("done", "skipped", "failed")}
     summary = {"out_dir": str(out_dir), "counts": counts, "seconds": time.perf_counter() - start,
                "cluster": {"scheduler": scheduler, "workers": cluster.workers, "pocl_threads": cluster.pocl_threads,
@@ -172,3 +159,40 @@ def command(inputs, out_dir, scheduler, workers, resume, as_json, **options):
     click.echo(to_json(summary, indent=2) if as_json else summary_text(summary))
     if counts["failed"]:
         sys.exit(1)
+
+
+def _batch(out_dir, captures, settings, scheduler, workers, resume, as_json):
+    """The batch proper, under OUTDIR's lock: the captures on the cluster; their results and the run's record."""
+    from ...batch.cluster import open_cluster
+    from ...batch.record import BatchLock, digest, remove_leftovers, settings_identity
+
+    start = time.perf_counter()
+    lock = BatchLock(out_dir, resume)
+    release = True
+    try:
+        leftovers = remove_leftovers(out_dir)
+        # the last run's summary no longer describes OUTDIR once this run changes it: only a finished run writes one
+        (out_dir / SUMMARY).unlink(missing_ok=True)
+        identity = settings_identity(settings)
+        key = digest(identity)
+        jobs = [{"name": c.name, "input": c.path, "out_dir": str(out_dir), "settings": settings, "settings_key": key,
+                 "identity": identity, "resume": resume} for c in captures]
+        cluster = open_cluster(scheduler, workers)
+        try:
+            where = scheduler or (f"a local cluster of {cluster.workers} worker process"
+                                  f"{'' if cluster.workers == 1 else 'es'}, POCL_MAX_PTHREAD_COUNT={cluster.pocl_threads}")
+            click.echo(f"lfcl batch: {_count(len(jobs), 'capture')} on {where}", err=True)
+            if cluster.dashboard:
+                click.echo(f"dashboard: {cluster.dashboard}", err=True)
+            results = _run(cluster, jobs, as_json)
+        except KeyboardInterrupt:
+            release = scheduler is None  # a remote cluster may still run tasks: leave the lock (--resume)
+            for name in ("distributed", "tornado", "asyncio"):  # the cluster's shutdown chatter after Ctrl-C
+                logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+            raise
+        finally:
+            cluster.close()
+    finally:
+        if release:
+            lock.release()
+    return results, cluster, lock, start, leftovers, key, identity
