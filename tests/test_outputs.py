@@ -389,3 +389,25 @@ def test_refocus_alone_implies_the_output(capture, tmp_path):
     result = run(capture / "raw.dng", "--method", "malvar", "-o", tmp_path / "o2", "--outputs", "refocus",
                  "--no-previews", "--json")
     assert [r["slope"] for r in json.loads(result.output)["refocus"]] == pytest.approx(np.arange(-1, 1.01, 0.25))
+
+
+def test_a_full_disk_is_named_with_the_file(lightfield, tmp_path, monkeypatch):
+    """numpy reports a full disk as "N requested and M written", without errno: the error names the file and the
+    free space, and nothing is left."""
+    import collections
+    import errno
+
+    import lfcl.io.images
+    import lfcl.outputs.files
+
+    plan = plan_outputs(lightfield, ["center", "lightfield"], previews=False)
+
+    def full(path, array):
+        raise OSError("248832 requested and 141280 written")
+
+    monkeypatch.setattr(lfcl.io.images, "write_npy", full)
+    usage = collections.namedtuple("usage", "total used free")
+    monkeypatch.setattr(lfcl.outputs.files.shutil, "disk_usage", lambda path: usage(2**20, 2**19, 2**19))
+    with pytest.raises(OSError, match=r"lightfield.npy: the disk is full \(0.5 MiB free; 248832 requested") as info:
+        write_outputs(tmp_path / "out", plan.files)
+    assert info.value.errno == errno.ENOSPC and not (tmp_path / "out").exists()

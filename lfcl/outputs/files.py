@@ -30,7 +30,9 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import errno
 import os
+import shutil
 import time
 from pathlib import Path
 
@@ -198,6 +200,24 @@ def plan_outputs(lightfield: np.ndarray, kinds, *, slopes=(), fmt: str = "exr", 
 
 
 def _write_one(out_dir: Path, f: PlannedFile) -> Path:
+    try:
+        return _write_file(out_dir, f)
+    except OSError as e:  # numpy says "N requested and M written" of a full disk: name the file and the space
+        from ..device import memory_text
+
+        try:
+            free = shutil.disk_usage(out_dir).free
+        except OSError:
+            raise e from None
+        if e.errno == errno.ENOSPC or free < 64 * 2**20:
+            full = OSError(f"cannot write {out_dir / f.name}: the disk is full ({memory_text(free)} free; "
+                           f"{e.strerror or e})")
+            full.errno = errno.ENOSPC
+            raise full from None
+        raise
+
+
+def _write_file(out_dir: Path, f: PlannedFile) -> Path:
     from ..io.images import write_image, write_json, write_npy
 
     path = out_dir / f.name
