@@ -270,6 +270,23 @@ def test_a_batch_that_cannot_reach_its_scheduler_leaves_no_outdir(captures, tmp_
     assert not (tmp_path / "new").exists()
 
 
+def test_temporary_folders_of_long_names_fit_a_file_system(tmp_path):
+    """A capture name of up to 255 bytes works in lfcl process; its batch's hidden folders must fit too."""
+    from lfcl.batch.record import partial_folder, publish, remove_leftovers
+
+    for name in ("a" * 250, "é" * 127, "x"):
+        tmp = partial_folder(tmp_path, name)
+        assert len(tmp.name.encode()) <= 255 and ".lfcl-partial-" in tmp.name
+        tmp.mkdir()
+        (tmp / "f").write_text("new")
+        final = tmp_path / name
+        final.mkdir(exist_ok=True)
+        publish(tmp, final)  # through the hidden .lfcl-old- folder
+        assert (final / "f").read_text() == "new"
+    assert remove_leftovers(tmp_path) == [] and sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        ["a" * 250, "é" * 127, "x"])
+
+
 def test_a_stale_lock_needs_resume(tmp_path):
     dead = subprocess.Popen(["true"])
     dead.wait()

@@ -127,8 +127,17 @@ def _version() -> str:
     return __version__
 
 
+def _temporary_name(name: str, kind: str) -> str:
+    """``.NAME.KIND-XXXXXXXXXXXX``, NAME cut (at a character) so the whole stays within a file system's 255 bytes:
+    a capture whose own name fits must not fail for its temporary folder's."""
+    tail = f".{kind}-{uuid.uuid4().hex[:12]}"
+    room = 255 - 1 - len(tail)
+    short = name.encode("utf-8", "surrogateescape")[:room].decode("utf-8", "ignore")
+    return f".{short}{tail}"
+
+
 def partial_folder(out_dir: Path, name: str) -> Path:
-    return out_dir / f".{name}.{PARTIAL}-{uuid.uuid4().hex[:12]}"
+    return out_dir / _temporary_name(name, PARTIAL)
 
 
 def publish(tmp: Path, final: Path) -> None:
@@ -141,7 +150,7 @@ def publish(tmp: Path, final: Path) -> None:
     """
     if final.exists():
         _carry_others(final, tmp)
-        old = final.parent / f".{final.name}.{OLD}-{uuid.uuid4().hex[:12]}"
+        old = final.parent / _temporary_name(final.name, OLD)
         os.rename(final, old)
         os.rename(tmp, final)
         shutil.rmtree(old, ignore_errors=True)
