@@ -368,6 +368,13 @@ def test_random_and_empty_files(tmp_path, ext):
             assert_cli_error(args, out, match=path.name)
 
 
+def test_a_text_file_named_like_a_raw_is_not_called_an_io_error(tmp_path):
+    """LibRaw answers data it cannot parse with LIBRAW_IO_ERROR ("Input/output error"); the file reads fine."""
+    path = tmp_path / "notes.nef"
+    path.write_bytes(b"hello\n")
+    assert_refused(path, match="the file itself reads fine: not a camera raw LibRaw can decode")
+
+
 @pytest.mark.parametrize("source, name, match", [
     ("png", "png_named.dng", "Unsupported file format"),
     ("dng", "dng_named.exr", "holds a tiff image, not the openexr"),

@@ -558,6 +558,8 @@ def _libraw_cause(error: BaseException, messages: list[str], path: Path) -> str:
         cause = str(error)
     if "Unsupported file format" in cause:
         cause += " (LibRaw cannot decode this file)"
+    elif type(error).__name__ == "LibRawIOError" and _readable(path):  # LibRaw's word for data it cannot parse
+        cause += " (the file itself reads fine: not a camera raw LibRaw can decode, or a damaged one)"
     extra = []
     for line in messages:
         line = line.strip()
@@ -568,6 +570,15 @@ def _libraw_cause(error: BaseException, messages: list[str], path: Path) -> str:
     if extra:
         cause += f" ({'; '.join(extra)})"
     return _one_line(f"{type(error).__name__}: {cause}")
+
+
+def _readable(path: Path) -> bool:
+    try:
+        with open(path, "rb") as f:
+            f.read(1)
+        return True
+    except OSError:
+        return False
 
 
 @contextlib.contextmanager
