@@ -472,6 +472,32 @@ def test_method_admm_epi_runs_and_records_the_disparity(runtime, rng):
     assert np.mean((result.planes - truth)[inner] ** 2) < np.mean((malvar.planes - truth)[inner] ** 2)
 
 
+def test_admm_epi_fills_the_dark_pixels_of_a_white_image(runtime, rng):
+    """With a white image's lens response, the pixels below its threshold (data weight 0) get the harmonic
+    extension of their lens's lit pixels, as the (u, v) solvers give them: applying the fill again changes nothing,
+    and their error is about admm-uv's (measured 0.175 against 0.142 rms; before, keeping what the start made of their
+    unflattened raw values, 0.352)."""
+    from lfcl.demosaic.driver import demosaic_grid
+    from lfcl.grid.model import AlignedGrid
+    from lfcl.grid.vignetting import flat_field_gain
+    from lfcl.noise.model import NoiseEstimate
+    from lfcl.ops.lensfill import lens_fill_np
+
+    S, T, U, V = 10, 10, 9, 9
+    b, _, truth = plane_scene_mosaic(rng, S, T, U, V, disparity=0.5, noise=0.005)
+    uu, vv = np.meshgrid(np.arange(U) - 4, np.arange(V) - 4, indexing="ij")
+    response = (np.cos(np.hypot(uu, vv) / 4.5 * 1.2) ** 4).astype(np.float32)  # corners near black
+    _, weights = flat_field_gain(response)
+    assert (weights == 0).sum() >= 20
+    raw = (b * np.tile(response, (S, T))).astype(np.float32)
+    noise = NoiseEstimate(gain=0.0, floor=2.5e-5, sigma=0.005, source="test")
+    planes = demosaic_grid(raw, "GRBG", AlignedGrid((U, V), lens_response=response), "admm-epi", noise=noise).planes
+    np.testing.assert_allclose(lens_fill_np(planes, weights, (U, V)), planes, atol=1e-5)
+    dark = np.tile(weights == 0, (S, T))[None].repeat(3, 0)
+    uv = demosaic_grid(raw, "GRBG", AlignedGrid((U, V), lens_response=response), "admm-uv", noise=noise).planes
+    assert np.sqrt(np.mean((planes - truth)[dark] ** 2)) < 1.5 * np.sqrt(np.mean((uv - truth)[dark] ** 2))
+
+
 @pytest.mark.parametrize("d_background, d_front", [(3.5, 0.3), (-3.0, 2.5)])
 def test_admm_epi_beyond_the_search_range_is_finite_and_above_malvar(d_background, d_front):
     """Issue 20's bad input: planes at disparities beyond the estimate's search range (+-2): admm-epi, as the

@@ -726,6 +726,8 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     else:
         planes, result = _solve_bands(runtime, b.get(), x0.get(), pattern, pitch, origin, params, prior, bands,
                                       callback, lens_weights)
+    if lens_weights is not None and np.any(np.asarray(lens_weights) == 0):
+        planes = _fill_dark(runtime, planes, lens_weights, pitch)
     if not np.all(np.isfinite(planes)):
         raise FloatingPointError("admm-epi produced NaN/Inf values; try a smaller lambda or rho")
     d, w = depth.disparity, depth.confidence
@@ -746,6 +748,19 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
         parameters["bands"] = {"lens_rows": [s1 - s0 for s0, s1, _, _ in bands], "halo_lens_rows": halo,
                                "iterations": [run.iterations for run in result.runs]}  # each band stops on its own
     return planes, parameters, result, depth_seconds
+
+
+def _fill_dark(runtime, planes: np.ndarray, lens_weights, pitch) -> np.ndarray:
+    """The dark lens pixels of a white image (data weight 0) get the harmonic extension of their lens's lit ones, as
+    the (u, v) solvers' give them (lfcl/ops/lensfill.py): their samples are not the flat-fielded scene (the flat field
+    leaves them raw), so what the start and the prior made of them is not either (docs/admm.md, "A white image's
+    dark pixels")."""
+    from ..ops.lensfill import LensFill
+
+    weights = np.asarray(lens_weights, np.float32).reshape(int(pitch[0]), int(pitch[1]))
+    x = runtime.to_device(np.ascontiguousarray(planes, np.float32))
+    LensFill(runtime, x.shape, pitch)(x, weights, runtime.to_device(weights.ravel()))
+    return x.get()
 
 
 #: admm-epi's default solver memory on a CPU device, whose "device memory" is the host's: at the paper's
