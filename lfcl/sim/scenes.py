@@ -2,8 +2,8 @@
 
 A scene is a list of :class:`lfcl.sim.planes.Plane`, front to back, built for a
 lens count (and seed). ``charts`` (:mod:`lfcl.sim.charts`), ``deadleaves``
-(:mod:`lfcl.sim.deadleaves`) and ``finetexture`` (:mod:`lfcl.sim.finetexture`)
-need no files. :func:`render_disparity` / :func:`planes_disparity`: the true
+(:mod:`lfcl.sim.deadleaves`), ``finetexture`` (:mod:`lfcl.sim.finetexture`) and ``periodic``
+(:mod:`lfcl.sim.periodic`, repeating content: a stress scene no default was fitted on) need no files. :func:`render_disparity` / :func:`planes_disparity`: the true
 centre-view disparity map of a scene. With ``texture=IMAGE`` the scene
 keeps its planes (depths, disparities, supports, occlusion) but every plane
 shows the image (:class:`lfcl.sim.texture.ImageTexture`), fitted to the plane's
@@ -21,10 +21,11 @@ import numpy as np
 from .charts import charts_planes
 from .deadleaves import deadleaves_planes
 from .finetexture import finetexture_planes
+from .periodic import periodic_planes
 from .planes import Plane, render_planes
 from .texture import ImageTexture, read_linear
 
-SCENES = ("charts", "deadleaves", "finetexture")
+SCENES = ("charts", "deadleaves", "finetexture", "periodic")
 
 
 def check_scene(name: str) -> str:
@@ -41,6 +42,8 @@ def scene_planes(name: str, lenses, seed: int = 0, pitch=(9, 9), texture=None) -
         planes = charts_planes((S, T), seed)
     elif name == "finetexture":
         planes = finetexture_planes((S, T), seed, pitch)
+    elif name == "periodic":
+        planes = periodic_planes((S, T), seed)
     else:
         planes = deadleaves_planes((S, T), seed, pitch)
     if texture is not None:
