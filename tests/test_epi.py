@@ -498,6 +498,29 @@ def test_admm_epi_fills_the_dark_pixels_of_a_white_image(runtime, rng):
     assert np.sqrt(np.mean((planes - truth)[dark] ** 2)) < 1.5 * np.sqrt(np.mean((uv - truth)[dark] ** 2))
 
 
+def test_admm_epi_in_bands_fills_the_dark_pixels_too(rng):
+    """The banded path (planes on the host after the bands) fills the dark pixels as the whole-frame one does."""
+    from lfcl.demosaic.driver import demosaic_grid
+    from lfcl.grid.model import AlignedGrid
+    from lfcl.grid.vignetting import flat_field_gain
+    from lfcl.noise.model import NoiseEstimate
+    from lfcl.ops.lensfill import lens_fill_np
+
+    S, T, U, V = 80, 10, 9, 9
+    b, _, _ = plane_scene_mosaic(rng, S, T, U, V, disparity=0.5, noise=0.005)
+    uu, vv = np.meshgrid(np.arange(U) - 4, np.arange(V) - 4, indexing="ij")
+    response = (np.cos(np.hypot(uu, vv) / 4.5 * 1.2) ** 4).astype(np.float32)
+    _, weights = flat_field_gain(response)
+    raw = (b * np.tile(response, (S, T))).astype(np.float32)
+    noise = NoiseEstimate(gain=0.0, floor=2.5e-5, sigma=0.005, source="test")
+    grid = AlignedGrid((U, V), lens_response=response)
+    banded = demosaic_grid(raw, "GRBG", grid, "admm-epi", noise=noise, max_memory=2**23, iterations=6)
+    assert len(banded.parameters["bands"]["lens_rows"]) > 1
+    np.testing.assert_allclose(lens_fill_np(banded.planes, weights, (U, V)), banded.planes, atol=1e-5)
+    whole = demosaic_grid(raw, "GRBG", grid, "admm-epi", noise=noise, iterations=6)
+    np.testing.assert_allclose(banded.planes, whole.planes, atol=1e-3)
+
+
 @pytest.mark.parametrize("d_background, d_front", [(3.5, 0.3), (-3.0, 2.5)])
 def test_admm_epi_beyond_the_search_range_is_finite_and_above_malvar(d_background, d_front):
     """Issue 20's bad input: planes at disparities beyond the estimate's search range (+-2): admm-epi, as the

@@ -718,16 +718,17 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     bands = epi_bands(S, halo, epi_lens_rows_that_fit((U, W), fallback, budget, runtime.device.max_mem_alloc_size,
                                                       cross_channel=params.cross_channel,
                                                       extrapolation=params.extrapolation > 0))
+    dark = lens_weights is not None and np.any(np.asarray(lens_weights) == 0)
     if len(bands) == 1:
         solver = EpiAdmmSolver(runtime, (H, W), pattern, pitch, origin)
         run = solver.solve(b, x0, params, prior, callback=callback, lens_weights=lens_weights)
-        planes = run.x.get()
+        planes = (_fill_dark(runtime, run.x, lens_weights, pitch) if dark else run.x).get()  # filled on the device
         result = BandedResult([dataclasses.replace(run, x=None)], [S])
     else:
         planes, result = _solve_bands(runtime, b.get(), x0.get(), pattern, pitch, origin, params, prior, bands,
                                       callback, lens_weights)
-    if lens_weights is not None and np.any(np.asarray(lens_weights) == 0):
-        planes = _fill_dark(runtime, planes, lens_weights, pitch)
+        if dark:  # the bands' planes are on the host already: up once, filled, down
+            planes = _fill_dark(runtime, runtime.to_device(planes), lens_weights, pitch).get()
     if not np.all(np.isfinite(planes)):
         raise FloatingPointError("admm-epi produced NaN/Inf values; try a smaller lambda or rho")
     d, w = depth.disparity, depth.confidence
@@ -750,7 +751,7 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     return planes, parameters, result, depth_seconds
 
 
-def _fill_dark(runtime, planes: np.ndarray, lens_weights, pitch) -> np.ndarray:
+def _fill_dark(runtime, x, lens_weights, pitch):
     """The dark lens pixels of a white image (data weight 0) get the harmonic extension of their lens's lit ones, as
     the (u, v) solvers' give them (lfcl/ops/lensfill.py): their samples are not the flat-fielded scene (the flat field
     leaves them raw), so what the start and the prior made of them is not either (docs/admm.md, "A white image's
@@ -758,9 +759,7 @@ def _fill_dark(runtime, planes: np.ndarray, lens_weights, pitch) -> np.ndarray:
     from ..ops.lensfill import LensFill
 
     weights = np.asarray(lens_weights, np.float32).reshape(int(pitch[0]), int(pitch[1]))
-    x = runtime.to_device(np.ascontiguousarray(planes, np.float32))
-    LensFill(runtime, x.shape, pitch)(x, weights, runtime.to_device(weights.ravel()))
-    return x.get()
+    return LensFill(runtime, x.shape, pitch)(x, weights, runtime.to_device(weights.ravel()))  # x [3, H, W], in place
 
 
 #: admm-epi's default solver memory on a CPU device, whose "device memory" is the host's: at the paper's
