@@ -283,7 +283,8 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
     loses on large flat in-focus patches), ``"lens-malvar"`` (Malvar bounded to each
     lens, so that no filter mixes two micro-images; docs/auto.md) or ``"guarded"`` (linear4d, with
     Malvar in the lenses where the two disagree far more than in the rest of the frame: high-contrast
-    edges and clipped highlights, where linear4d breaks; lfcl/demosaic/guarded_start.py, recorded in
+    edges and clipped highlights, where linear4d breaks; with admm-epi also where the epipolar lines carry
+    one colour, so that the missing colours are the start's; lfcl/demosaic/guarded_start.py, recorded in
     ``parameters["start_guard"]``).
     ``skip_flat`` (admm-uv, admm-uv-xc): lenses that are flat within the noise (a chi-square
     test, lfcl/demosaic/flat_lenses.py) get their colour means and the solve runs on the others only,
@@ -323,6 +324,11 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
         start, epi_start_replaced = epi_start(noise.sigma, pitch)
     start = start or "malvar"
     guard = None
+    depth, depth_seconds = disparity, None  # admm-epi's: the one given, else estimated for the start or the solve
+    if method == "admm-epi" and depth is not None:
+        from ..solvers.epi import check_depth
+
+        check_depth(depth, mosaic.shape, pitch)
     if start in ("linear4d", "guarded"):
         from ..ops.linear4d import linear4d_operator
 
@@ -331,8 +337,12 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
         if start == "guarded":  # Malvar in the lenses where linear4d breaks (lfcl/demosaic/guarded_start.py)
             from .guarded_start import guarded_start
 
+            if method == "admm-epi" and depth is None:  # and in those of one-colour epipolar lines
+                from ..solvers.epi import epi_disparity
+
+                depth, depth_seconds = epi_disparity(raw_mosaic, pattern, pitch, origin, noise, device)
             malvar = Malvar(runtime, mosaic.shape, pattern, origin).forward(b)
-            x0, guard = guarded_start(runtime, x0, malvar, b, pitch, noise)
+            x0, guard = guarded_start(runtime, x0, malvar, b, pitch, noise, depth=depth)
             del malvar
     else:  # lens-malvar: Malvar bounded to each lens, so that no filter reads a neighbouring micro-image
         x0 = Malvar(runtime, mosaic.shape, pattern, origin, lens=pitch if start == "lens-malvar" else None).forward(b)
@@ -378,7 +388,7 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
             lam_fb = params.lam * defaults.fb_per_sigma / defaults.lam_per_sigma
         planes, extra, run, depth_seconds = demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params,
                                                          lam_fb, noise, device, lens_weights, callback, max_memory,
-                                                         depth=disparity)
+                                                         depth=depth, depth_seconds=depth_seconds)
         parameters = {**dataclasses.asdict(params), "start": start, **extra}
         if epi_start_replaced is not None:
             parameters["start_replaced"] = epi_start_replaced

@@ -673,14 +673,38 @@ def epi_block_jacobi_np(blocks, r) -> np.ndarray:
     return np.moveaxis(np.where(definite[..., None], np.linalg.solve(safe, rhs)[..., 0], 0.0), -1, 0)
 
 
+def epi_disparity(raw_mosaic, pattern, pitch, origin, noise, device=None, depth_options: dict | None = None):
+    """admm-epi's disparity of the raw (lfcl.depth.estimate_disparity with :func:`epi_depth_options`, or
+    ``depth_options``) and the seconds it took."""
+    import time
+
+    from ..depth import estimate_disparity
+
+    began = time.perf_counter()
+    depth = estimate_disparity(raw_mosaic, pattern, pitch, origin=origin, noise=noise, device=device,
+                               **(epi_depth_options(None if noise is None else noise.sigma)
+                                  if depth_options is None else depth_options))
+    return depth, time.perf_counter() - began
+
+
+def check_depth(depth, sensor_shape, pitch):
+    """A ValueError unless the disparity map ``depth`` has one value per lens of a ``sensor_shape`` raw."""
+    lenses = (int(sensor_shape[0]) // int(pitch[0]), int(sensor_shape[1]) // int(pitch[1]))
+    if tuple(depth.disparity.shape) != lenses:
+        raise ValueError(f"the disparity map given has {depth.disparity.shape[0]}x{depth.disparity.shape[1]} "
+                         f"lenses, this raw {lenses[0]}x{lenses[1]}")
+
+
 def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: AdmmParams, lam_fb: float, noise,
                  device=None, lens_weights=None, callback=None, max_memory: int | None = None,
-                 depth_options: dict | None = None, depth=None) -> tuple[np.ndarray, dict, AdmmResult, float]:
+                 depth_options: dict | None = None, depth=None, depth_seconds: float | None = None
+                 ) -> tuple[np.ndarray, dict, AdmmResult, float]:
     """``admm-epi`` of lfcl.demosaic.methods.solve_aligned: estimate the disparity from the raw
-    (lfcl.depth.estimate_disparity), then solve from the start ``x0`` (device arrays ``b``, ``x0``).
-    ``depth``: a disparity map already estimated from this raw (an ``lfcl.depth.DisparityMap`` of its lenses: the
-    depth output's, whose finer candidates change the solve by hundredths of a dB, docs/admm.md) instead of one with
-    :func:`epi_depth_options`; its seconds are then 0 here.
+    (:func:`epi_disparity`), then solve from the start ``x0`` (device arrays ``b``, ``x0``).
+    ``depth``: a disparity map already estimated from this raw (an ``lfcl.depth.DisparityMap`` of its lenses): with
+    ``depth_seconds``, :func:`epi_disparity`'s, made for the start (lfcl/demosaic/guarded_start.py) and taking that
+    long; without, the depth output's, whose finer candidates change the solve by hundredths of a dB (docs/admm.md),
+    and its seconds are 0 here.
 
     A sensor whose solver does not fit ``max_memory`` (default :func:`epi_default_budget`) is solved in bands of
     lens rows, each with the halo of lens rows its prior reaches (:func:`epi_halo`), each stopped by its own
@@ -690,23 +714,13 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     statistics, lam_fb, the bands), the solver's runs (:class:`BandedResult`, their x dropped) and the seconds the
     disparity took (apart from the parameters, so that the same raw and options record the same parameters).
     """
-    import time
-
-    from ..depth import estimate_disparity
-
     H, W = b.shape
-    began = time.perf_counter()
-    shared = depth is not None
-    if shared:
-        lenses = (H // int(pitch[0]), W // int(pitch[1]))
-        if tuple(depth.disparity.shape) != lenses:
-            raise ValueError(f"the disparity map given has {depth.disparity.shape[0]}x{depth.disparity.shape[1]} "
-                             f"lenses, this raw {lenses[0]}x{lenses[1]}")
+    shared = depth is not None and depth_seconds is None
+    if depth is not None:
+        check_depth(depth, (H, W), pitch)
     else:
-        depth = estimate_disparity(raw_mosaic, pattern, pitch, origin=origin, noise=noise, device=device,
-                                   **(epi_depth_options(None if noise is None else noise.sigma)
-                                      if depth_options is None else depth_options))
-    depth_seconds = 0.0 if shared else time.perf_counter() - began
+        depth, depth_seconds = epi_disparity(raw_mosaic, pattern, pitch, origin, noise, device, depth_options)
+    depth_seconds = 0.0 if shared else depth_seconds
     # The confidence splits the prior between the epipolar lines and the fall-back: without a fall-back every ray
     # keeps its full weight (a low-confidence lens would otherwise be left with almost no prior).
     prior = EpiPrior(depth.disparity, depth.confidence if lam_fb > 0 else None, lam_fb=float(lam_fb))
