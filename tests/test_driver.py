@@ -161,6 +161,25 @@ def test_a_given_disparity_map_is_checked_and_solved_with(rng, monkeypatch):
         demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-epi", noise=NOISE, iterations=1, disparity=small)
 
 
+def test_admm_epi_estimates_its_disparity_once_for_the_start_and_the_solve(rng, monkeypatch):
+    """The guarded start reads admm-epi's disparity (its one-colour lenses); the solve takes the same map."""
+    import lfcl.depth
+    from lfcl.depth import estimate_disparity
+
+    calls = []
+
+    def counted(*args, **kwargs):
+        calls.append(kwargs)
+        return estimate_disparity(*args, **kwargs)
+
+    monkeypatch.setattr(lfcl.depth, "estimate_disparity", counted)
+    mosaic = (0.3 + 0.05 * rng.standard_normal((6 * 9, 7 * 9))).astype(np.float32)
+    result = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-epi", noise=NOISE, start="guarded", iterations=2)
+    assert len(calls) == 1
+    assert "one_colour_lenses" in result.parameters["start_guard"]
+    assert result.parameters["disparity"]["source"] == "estimated for admm-epi" and "disparity" in result.part_seconds
+
+
 def test_a_disparity_map_is_refused_on_a_resampled_grid(tmp_path):
     gridded = gridded_of(tmp_path, "hex", 9.4)
     with pytest.raises(ValueError, match="a disparity map is for aligned square lens grids"):
