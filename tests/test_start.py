@@ -242,7 +242,7 @@ def test_guarded_start_takes_malvar_in_confident_one_colour_lenses_and_their_nei
     neighbours) start from Malvar too."""
     from types import SimpleNamespace
 
-    from lfcl.demosaic.guarded_start import ONE_COLOUR_CONFIDENCE, guarded_start, malvar_lenses, with_neighbours
+    from lfcl.demosaic.guarded_start import CONFIDENT, guarded_start, malvar_lenses, with_neighbours
     from lfcl.ops.lensguard import lens_disagreement_np
     from lfcl.ops.malvar import Malvar
 
@@ -251,7 +251,7 @@ def test_guarded_start_takes_malvar_in_confident_one_colour_lenses_and_their_nei
     disparity, confidence = np.full((S, T), 0.4), np.ones((S, T))
     disparity[0, 0] = 1.04  # one colour along its lines: it and its neighbours take Malvar's start
     disparity[3, 4] = 1.3  # not within 0.1 of an odd disparity
-    disparity[3, 0], confidence[3, 0] = -0.97, ONE_COLOUR_CONFIDENCE * 0.9  # one colour, but not confident
+    disparity[3, 0], confidence[3, 0] = -0.97, CONFIDENT * 0.9  # one colour, but not confident
     linear = linear4d(runtime, b, "GRBG", (9, 9), (0, 0), NOISE).astype(np.float64)
     malvar = malvar_np(b, "GRBG").astype(np.float64)
     outliers = malvar_lenses(lens_disagreement_np(linear, malvar, b, (9, 9), gain=NOISE.gain, floor=NOISE.floor))
@@ -265,13 +265,53 @@ def test_guarded_start_takes_malvar_in_confident_one_colour_lenses_and_their_nei
         return guarded_start(runtime, runtime.to_device(linear.astype(np.float32)),
                              Malvar(runtime, b.shape, "GRBG").forward(device_b), device_b, (9, 9), NOISE, **depth)
 
-    got, report = start(depth=SimpleNamespace(disparity=disparity, confidence=confidence), one_colour_within=0.1)
+    got, report = start(depth=SimpleNamespace(disparity=disparity, confidence=confidence, dmax=2.0, step=0.1),
+                        one_colour_within=0.1)
     expected = np.where(np.repeat(np.repeat(chosen, 9, 0), 9, 1)[None], malvar, linear)
     np.testing.assert_allclose(got.get(), expected, atol=1e-5)
-    assert report["one_colour_lenses"] == 1 and report["lenses_from_malvar"] == chosen.sum()
+    assert report["one_colour_lenses"] == 1 and report["range_edge_lenses"] == 0
+    assert report["lenses_from_malvar"] == chosen.sum()
     # without the disparity (the methods that do not follow the lines) only the outliers move
     _, report = start()
     assert report["lenses_from_malvar"] == outliers.sum() and "one_colour_lenses" not in report
+
+
+def test_range_edge_lenses_are_a_majority_at_the_search_ranges_end_and_not_confident():
+    """Lenses whose best candidate is an end of the search range and whose confidence is below CONFIDENT, where most
+    of their 3x3 neighbourhood is so too: not a lone one, not a confident region, not one a step inside the range."""
+    from types import SimpleNamespace
+
+    from lfcl.demosaic.guarded_start import CONFIDENT, range_edge_lenses
+
+    d, w = np.full((8, 9), 0.3), np.full((8, 9), 0.9)
+    d[1:4, 1:4], w[1:4, 1:4] = -2.0, 0.05  # a 3x3 block beyond the range: its centre and its middle-edge lenses
+    d[6, 7], w[6, 7] = 2.0, 0.0  # a lone one
+    d[5:8, 0:3], w[5:8, 0:3] = 2.0, CONFIDENT  # confident: a plane at the range's end
+    d[0:3, 5:8], w[0:3, 5:8] = 1.9, 0.0  # one step inside the range (step 0.1)
+    got = range_edge_lenses(SimpleNamespace(disparity=d, confidence=w, dmax=2.0, step=0.1))
+    expected = np.zeros((8, 9), bool)
+    expected[1:4, 1:4] = True  # each of the 9 has at least 5 of its 3x3 at the end (the corners have 4: not)
+    expected[1, 1] = expected[1, 3] = expected[3, 1] = expected[3, 3] = False
+    np.testing.assert_array_equal(got, expected)
+    assert range_edge_lenses(SimpleNamespace(disparity=d, confidence=w, dmax=2.0, step=0.1), majority=1)[6, 7]
+
+
+def test_admm_epi_on_content_beyond_the_search_range_is_not_below_malvar():
+    """A grey grating of period 10 lenses at disparity -3 (beyond the search range of +-2) filling a 24x24-lens
+    frame: admm-epi as `lfcl process` runs it was 2.65 dB below Malvar's centre view at 12 lux before its range-edge
+    lenses took Malvar's start (docs/auto.md, "Periodic content")."""
+    from lfcl.evaluation.evaluate import run_method, simulation_capture
+    from lfcl.sim import simulate
+    from lfcl.sim.periodic import SineGrating
+    from lfcl.sim.planes import Plane
+
+    for lux in (2, 12):
+        capture = simulation_capture(simulate(planes=[Plane("far grating", -3.0, SineGrating(10.0, 1.1))],
+                                              lenses=(24, 24), lux=lux, seed=3))
+        malvar, got = run_method(capture, "malvar"), run_method(capture, "admm-epi")
+        assert got["psnr_center"] >= malvar["psnr_center"], (lux, got["psnr_center"], malvar["psnr_center"])
+        assert got["psnr_mean"] >= malvar["psnr_mean"], (lux, got["psnr_mean"], malvar["psnr_mean"])
+        assert got["parameters"]["start_guard"]["range_edge_lenses"] > 100
 
 
 def test_admm_epi_on_a_grey_grating_at_disparity_one_is_not_below_malvar():

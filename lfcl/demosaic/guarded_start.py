@@ -11,11 +11,16 @@ frame's median D (and at least ``GUARD_FACTOR`` noise sigmas), and so do its 8 n
 outlier test on the frame's own scale, which does not move with the light level as a fixed
 threshold would (one did, measured: docs/auto.md).
 
-With admm-epi's disparity it also takes the Malvar start in the lenses whose epipolar lines carry one
-colour (:func:`one_colour_lenses`): with an odd pitch and an odd integer disparity every sample along a
-line has the same CFA colour, so neither the data term nor the prior along the lines says anything about
-the line's two other colours, and admm-epi keeps whatever the start put there. linear4d's guess breaks on
-lens-scale gratings (docs/auto.md, "Periodic content"); Malvar's is Malvar's own.
+With admm-epi's disparity it also takes the Malvar start where the lines it will follow cannot correct the
+start (docs/auto.md, "Periodic content"):
+
+* in the lenses whose epipolar lines carry one colour (:func:`one_colour_lenses`): with an odd pitch and an
+  odd integer disparity every sample along a line has the same CFA colour, so neither the data term nor the
+  prior along the lines says anything about the line's two other colours, and admm-epi keeps whatever the
+  start put there. linear4d's guess breaks on lens-scale gratings; Malvar's is Malvar's own;
+* in regions whose disparity is an end of the search range and not confident (:func:`range_edge_lenses`):
+  content beyond the range, or a repeating pattern the cost cannot tell from a coloured one, so the lines
+  followed are not the scene's.
 
 D is computed and the lenses are swapped on the device; only the [S, T] array of D visits the host.
 """
@@ -30,22 +35,32 @@ from ..ops.lensguard import LensGuard
 #: How many times the frame's median disagreement a lens's must exceed to take the Malvar start.
 GUARD_FACTOR = 2.5
 #: Lenses whose disparity lies within this many lenses per view step of a one-colour disparity
-#: (:func:`one_colour_lenses`) take the Malvar start. research/fit_one_colour_start.py on the training captures
-#: (admm-epi, 0.5-50 lux, with ONE_COLOUR_CONFIDENCE): every margin from 0.05 to 0.3 left every cell at or above
+#: (:func:`one_colour_lenses`) take the Malvar start. research/epi_start_guard.py within, on the training captures
+#: (admm-epi, 0.5-50 lux, with CONFIDENT): every margin from 0.05 to 0.3 left every cell at or above
 #: no such rule (4 of 40 cells moved, all finetexture seed 1's: +0.10..+0.17 dB of centre view) and 0.05 is the
 #: smallest of them (docs/auto.md, "Periodic content").
 ONE_COLOUR_WITHIN = 0.05
-#: ... and whose disparity is confident: at least this (lfcl.depth's confidence; the share of lenses at 0.5 or more
-#: is what admm-epi's parameters call confident). Without it, at 0.5 lux, the noise gave 36 lenses of a training
-#: photograph (Kodak DC120 at 48x48 lenses) an odd disparity and the start's noise in them cost 0.36 dB of centre view.
-ONE_COLOUR_CONFIDENCE = 0.5
+#: The disparity confidence (lfcl.depth) from which a lens's disparity counts as known, as admm-epi's parameters
+#: count it (``confident_share``): one-colour lenses must reach it, range-edge ones must not. Without it, at 0.5 lux,
+#: the noise gave 36 lenses of a training photograph (Kodak DC120 at 48x48 lenses) an odd disparity and the start's
+#: noise in them cost 0.36 dB of centre view.
+CONFIDENT = 0.5
+#: A range-edge lens counts where at least this many of its 3x3 neighbourhood (itself included) are range-edge
+#: lenses: a majority. Lone ones are the noise's (at 0.5 lux 13-14 lenses of two training photographs, which cost
+#: them up to 0.26 dB of centre view; docs/auto.md, "Periodic content").
+RANGE_EDGE_MAJORITY = 5
+
+
+def neighbourhood_count(lenses: np.ndarray) -> np.ndarray:
+    """Per lens [S, T], how many of its 3x3 neighbourhood (itself included) are in ``lenses`` (bool)."""
+    padded = np.pad(lenses, 1).astype(np.int32)
+    S, T = lenses.shape
+    return sum(padded[i:i + S, j:j + T] for i in range(3) for j in range(3))
 
 
 def with_neighbours(lenses: np.ndarray) -> np.ndarray:
     """``lenses`` [S, T] (bool) and their 8 neighbours: linear4d at a neighbour reads the same lenses."""
-    padded = np.pad(lenses, 1)
-    S, T = lenses.shape
-    return np.logical_or.reduce([padded[i:i + S, j:j + T] for i in range(3) for j in range(3)])
+    return neighbourhood_count(lenses) > 0
 
 
 def disagreement_outliers(d: np.ndarray, factor: float = GUARD_FACTOR) -> np.ndarray:
@@ -74,13 +89,25 @@ def one_colour_lenses(disparity: np.ndarray, pitch, within: float = ONE_COLOUR_W
     return odd & (np.abs(d - k) < within)
 
 
+def range_edge_lenses(depth, majority: int | None = None) -> np.ndarray:
+    """The lenses [S, T] whose disparity is an end of the search range (the best candidate is the last one) and not
+    confident (below :data:`CONFIDENT`), in a neighbourhood where ``majority`` (None: :data:`RANGE_EDGE_MAJORITY`)
+    of the 3x3 lenses are so too.
+
+    ``depth``: an ``lfcl.depth.DisparityMap`` (its ``disparity``, ``confidence``, ``dmax`` and ``step``)."""
+    at_end = np.abs(np.asarray(depth.disparity, np.float64)) >= float(depth.dmax) - 0.25 * float(depth.step)
+    edge = at_end & (np.asarray(depth.confidence) < CONFIDENT)
+    return edge & (neighbourhood_count(edge) >= (RANGE_EDGE_MAJORITY if majority is None else int(majority)))
+
+
 def guarded_start(runtime, linear4d_start, malvar_start, mosaic, pitch, noise: NoiseEstimate,
                   factor: float = GUARD_FACTOR, depth=None, one_colour_within: float | None = None):
     """The guarded start, written into the device ``linear4d_start`` [3, H, W] (which is returned),
     and what it did (``factor``, the median D, ``lenses_from_malvar`` of ``lenses``). With ``depth``, admm-epi's
     ``lfcl.depth.DisparityMap``, the lenses of one-colour lines (:func:`one_colour_lenses`, ``one_colour_within``;
-    None: :data:`ONE_COLOUR_WITHIN`) whose confidence is at least :data:`ONE_COLOUR_CONFIDENCE` and their neighbours
-    take Malvar's too (``one_colour_lenses``, ``one_colour_within``, ``one_colour_confidence``)."""
+    None: :data:`ONE_COLOUR_WITHIN`) whose confidence is at least :data:`CONFIDENT` and their neighbours
+    take Malvar's too, and so do the lenses of :func:`range_edge_lenses` and theirs (``one_colour_lenses``,
+    ``one_colour_within``, ``confident``, ``range_edge_lenses``)."""
     guard = LensGuard(runtime, mosaic.shape, pitch)
     d = guard.disagreement(linear4d_start, malvar_start, mosaic, noise.gain, noise.floor)
     outliers = disagreement_outliers(d, factor)
@@ -88,10 +115,11 @@ def guarded_start(runtime, linear4d_start, malvar_start, mosaic, pitch, noise: N
     if depth is not None:
         one_colour_within = ONE_COLOUR_WITHIN if one_colour_within is None else float(one_colour_within)
         one_colour = one_colour_lenses(depth.disparity, pitch, one_colour_within)
-        one_colour &= depth.confidence >= ONE_COLOUR_CONFIDENCE
-        outliers |= one_colour
-        report.update(one_colour_within=one_colour_within, one_colour_confidence=ONE_COLOUR_CONFIDENCE,
-                      one_colour_lenses=int(one_colour.sum()))
+        one_colour &= depth.confidence >= CONFIDENT
+        range_edge = range_edge_lenses(depth)
+        outliers |= one_colour | range_edge
+        report.update(one_colour_within=one_colour_within, confident=CONFIDENT,
+                      one_colour_lenses=int(one_colour.sum()), range_edge_lenses=int(range_edge.sum()))
     chosen = with_neighbours(outliers)
     if chosen.any():
         guard.take(linear4d_start, malvar_start, chosen)
