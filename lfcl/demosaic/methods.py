@@ -284,7 +284,8 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
     lens, so that no filter mixes two micro-images; docs/auto.md) or ``"guarded"`` (linear4d, with
     Malvar in the lenses where the two disagree far more than in the rest of the frame: high-contrast
     edges and clipped highlights, where linear4d breaks; with admm-epi also where the epipolar lines carry
-    one colour, so that the missing colours are the start's; lfcl/demosaic/guarded_start.py, recorded in
+    one colour, so that the missing colours are the start's, and where the disparity sits at an end of the search
+    range without confidence; lfcl/demosaic/guarded_start.py, recorded in
     ``parameters["start_guard"]``).
     ``skip_flat`` (admm-uv, admm-uv-xc): lenses that are flat within the noise (a chi-square
     test, lfcl/demosaic/flat_lenses.py) get their colour means and the solve runs on the others only,
@@ -337,7 +338,7 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
         if start == "guarded":  # Malvar in the lenses where linear4d breaks (lfcl/demosaic/guarded_start.py)
             from .guarded_start import guarded_start
 
-            if method == "admm-epi" and depth is None:  # and in those of one-colour epipolar lines
+            if method == "admm-epi" and depth is None:  # and where the lines admm-epi follows cannot mend it
                 from ..solvers.epi import epi_disparity
 
                 depth, depth_seconds = epi_disparity(raw_mosaic, pattern, pitch, origin, noise, device)
