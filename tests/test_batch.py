@@ -212,8 +212,12 @@ def test_ctrl_c_stops_a_local_batch_quietly(captures, tmp_path):
     out.mkdir()
     (out / "lfcl-batch-summary.json").write_text("{}")  # an earlier run's
     code = "import sys; from lfcl.cli import main; sys.argv[0] = 'lfcl'; main()"
+    # SIGINT's default in the child, as a terminal's foreground job has it: a test run started in the background
+    # (`cmd &` in a script) inherits SIGINT ignored, and Python keeps an inherited SIG_IGN, so the batch would
+    # never see the interrupt (two CI runs started so failed here)
     proc = subprocess.Popen([sys.executable, "-c", code, "batch", str(many), "-o", str(out), "--workers", "2",
                              "--method", "admm-uvst", "--iterations", "300"], start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=tmp_path)
     try:
         deadline = time.monotonic() + 120
