@@ -325,3 +325,29 @@ def test_batch_without_dask_names_the_extra(tmp_path, monkeypatch):
     assert result.exit_code == 1
     assert result.output.strip() == "lfcl: error: lfcl batch runs on Dask, which is not installed: pip install 'lfcl[batch]'"
     assert not (tmp_path / "out").exists()
+
+
+def test_a_ctrl_c_while_the_cluster_closes_waits_for_the_close_then_raises():
+    """Both closes run to their end before the KeyboardInterrupt: an interrupted close left the local cluster to
+    distributed's exit handler, and a Ctrl-C as the last captures finished took 10 s to end the batch."""
+    from lfcl.batch.cluster import Cluster
+
+    closed = []
+
+    class Part:
+        def __init__(self, name, interrupt=False):
+            self.name, self.interrupt = name, interrupt
+
+        def close(self):
+            if self.interrupt:
+                os.kill(os.getpid(), signal.SIGINT)  # delivered here, in the main thread, before close returns
+                time.sleep(0.05)
+            closed.append(self.name)
+
+    before = signal.getsignal(signal.SIGINT)
+    with pytest.raises(KeyboardInterrupt):
+        Cluster(Part("client", interrupt=True), Part("local"), 1, None, None).close()
+    assert closed == ["client", "local"]
+    assert signal.getsignal(signal.SIGINT) is before
+    Cluster(Part("client"), None, 1, None, None).close()  # without a Ctrl-C: nothing raised
+    assert closed == ["client", "local", "client"]
