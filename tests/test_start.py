@@ -277,8 +277,9 @@ def test_guarded_start_takes_malvar_in_confident_one_colour_lenses_and_their_nei
 
 
 def test_range_edge_lenses_are_a_majority_at_the_search_ranges_end_and_not_confident():
-    """Lenses whose best candidate is an end of the search range and whose confidence is below CONFIDENT, where most
-    of their 3x3 neighbourhood is so too: not a lone one, not a confident region, not one a step inside the range."""
+    """Lenses whose best candidate is an end of the search range, whose confidence is below CONFIDENT and whose
+    micro-image is not flat, where most of their 3x3 neighbourhood is so too: not a lone one, not a confident region,
+    not one a step inside the range, not flat ones."""
     from types import SimpleNamespace
 
     from lfcl.demosaic.guarded_start import CONFIDENT, range_edge_lenses
@@ -294,6 +295,11 @@ def test_range_edge_lenses_are_a_majority_at_the_search_ranges_end_and_not_confi
     expected[1, 1] = expected[1, 3] = expected[3, 1] = expected[3, 3] = False
     np.testing.assert_array_equal(got, expected)
     assert range_edge_lenses(SimpleNamespace(disparity=d, confidence=w, dmax=2.0, step=0.1), majority=1)[6, 7]
+    # lenses flat within the noise have no lines to get wrong: with the block's centre and middle-edge lenses flat,
+    # its four corners are left, none next to another, and nothing counts
+    flat = np.zeros((8, 9), bool)
+    flat[2, 1:4] = flat[1:4, 2] = True
+    assert not range_edge_lenses(SimpleNamespace(disparity=d, confidence=w, dmax=2.0, step=0.1), flat).any()
 
 
 def test_admm_epi_on_content_beyond_the_search_range_is_not_below_malvar():
@@ -312,6 +318,20 @@ def test_admm_epi_on_content_beyond_the_search_range_is_not_below_malvar():
         assert got["psnr_center"] >= malvar["psnr_center"], (lux, got["psnr_center"], malvar["psnr_center"])
         assert got["psnr_mean"] >= malvar["psnr_mean"], (lux, got["psnr_mean"], malvar["psnr_mean"])
         assert got["parameters"]["start_guard"]["range_edge_lenses"] > 100
+
+
+def test_a_texture_less_wall_has_no_range_edge_lenses():
+    """A flat grey wall: its disparity estimate drifts to the search range's ends where nothing tells the candidates
+    apart (64 lenses of 576 counted before the flat lenses were left out), but it has no lines to get wrong."""
+    from lfcl.evaluation.evaluate import run_method, simulation_capture
+    from lfcl.sim import simulate
+    from lfcl.sim.planes import Plane
+
+    def grey(x, y):
+        return np.full(np.shape(x) + (3,), 0.4, np.float32)
+
+    capture = simulation_capture(simulate(planes=[Plane("wall", 0.3, grey)], lenses=(24, 24), lux=2, seed=3))
+    assert run_method(capture, "admm-epi")["parameters"]["start_guard"]["range_edge_lenses"] == 0
 
 
 def test_admm_epi_on_a_grey_grating_at_disparity_one_is_not_below_malvar():

@@ -18,9 +18,10 @@ start (docs/auto.md, "Periodic content"):
   odd integer disparity every sample along a line has the same CFA colour, so neither the data term nor the
   prior along the lines says anything about the line's two other colours, and admm-epi keeps whatever the
   start put there. linear4d's guess breaks on lens-scale gratings; Malvar's is Malvar's own;
-* in regions whose disparity is an end of the search range and not confident (:func:`range_edge_lenses`):
-  content beyond the range, or a repeating pattern the cost cannot tell from a coloured one, so the lines
-  followed are not the scene's.
+* in regions whose disparity is an end of the search range and not confident, and whose micro-images are not
+  flat within the noise (:func:`range_edge_lenses`): content beyond the range, or a repeating pattern the cost
+  cannot tell from a coloured one, so the lines followed are not the scene's. (A texture-less lens has no line
+  to get wrong; its estimate drifts to the range's ends too, where nothing tells the candidates apart.)
 
 D is computed and the lenses are swapped on the device; only the [S, T] array of D visits the host.
 """
@@ -89,25 +90,29 @@ def one_colour_lenses(disparity: np.ndarray, pitch, within: float = ONE_COLOUR_W
     return odd & (np.abs(d - k) < within)
 
 
-def range_edge_lenses(depth, majority: int | None = None) -> np.ndarray:
-    """The lenses [S, T] whose disparity is an end of the search range (the best candidate is the last one) and not
-    confident (below :data:`CONFIDENT`), in a neighbourhood where ``majority`` (None: :data:`RANGE_EDGE_MAJORITY`)
-    of the 3x3 lenses are so too.
+def range_edge_lenses(depth, flat: np.ndarray | None = None, majority: int | None = None) -> np.ndarray:
+    """The lenses [S, T] whose disparity is an end of the search range (the best candidate is the last one), not
+    confident (below :data:`CONFIDENT`) and not ``flat`` ([S, T] bool: flat within the noise,
+    lfcl/demosaic/flat_lenses.py; None: none is), in a neighbourhood where ``majority`` (None:
+    :data:`RANGE_EDGE_MAJORITY`) of the 3x3 lenses are so too.
 
     ``depth``: an ``lfcl.depth.DisparityMap`` (its ``disparity``, ``confidence``, ``dmax`` and ``step``)."""
     at_end = np.abs(np.asarray(depth.disparity, np.float64)) >= float(depth.dmax) - 0.25 * float(depth.step)
     edge = at_end & (np.asarray(depth.confidence) < CONFIDENT)
+    if flat is not None:
+        edge &= ~np.asarray(flat, bool)
     return edge & (neighbourhood_count(edge) >= (RANGE_EDGE_MAJORITY if majority is None else int(majority)))
 
 
 def guarded_start(runtime, linear4d_start, malvar_start, mosaic, pitch, noise: NoiseEstimate,
-                  factor: float = GUARD_FACTOR, depth=None, one_colour_within: float | None = None):
+                  factor: float = GUARD_FACTOR, depth=None, one_colour_within: float | None = None,
+                  flat: np.ndarray | None = None):
     """The guarded start, written into the device ``linear4d_start`` [3, H, W] (which is returned),
     and what it did (``factor``, the median D, ``lenses_from_malvar`` of ``lenses``). With ``depth``, admm-epi's
     ``lfcl.depth.DisparityMap``, the lenses of one-colour lines (:func:`one_colour_lenses`, ``one_colour_within``;
     None: :data:`ONE_COLOUR_WITHIN`) whose confidence is at least :data:`CONFIDENT` and their neighbours
-    take Malvar's too, and so do the lenses of :func:`range_edge_lenses` and theirs (``one_colour_lenses``,
-    ``one_colour_within``, ``confident``, ``range_edge_lenses``)."""
+    take Malvar's too, and so do the lenses of :func:`range_edge_lenses` (with ``flat``, the lenses flat within the
+    noise) and theirs (``one_colour_lenses``, ``one_colour_within``, ``confident``, ``range_edge_lenses``)."""
     guard = LensGuard(runtime, mosaic.shape, pitch)
     d = guard.disagreement(linear4d_start, malvar_start, mosaic, noise.gain, noise.floor)
     outliers = disagreement_outliers(d, factor)
@@ -116,7 +121,7 @@ def guarded_start(runtime, linear4d_start, malvar_start, mosaic, pitch, noise: N
         one_colour_within = ONE_COLOUR_WITHIN if one_colour_within is None else float(one_colour_within)
         one_colour = one_colour_lenses(depth.disparity, pitch, one_colour_within)
         one_colour &= depth.confidence >= CONFIDENT
-        range_edge = range_edge_lenses(depth)
+        range_edge = range_edge_lenses(depth, flat)
         outliers |= one_colour | range_edge
         report.update(one_colour_within=one_colour_within, confident=CONFIDENT,
                       one_colour_lenses=int(one_colour.sum()), range_edge_lenses=int(range_edge.sum()))

@@ -342,8 +342,14 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
                 from ..solvers.epi import epi_disparity
 
                 depth, depth_seconds = epi_disparity(raw_mosaic, pattern, pitch, origin, noise, device)
+            flat = None
+            if method == "admm-epi":  # lenses flat within the noise have no lines to get wrong
+                statistics = LensFlatness(runtime, mosaic.shape, pattern, pitch, origin)(b, lens_weights, noise.gain,
+                                                                                           noise.floor)
+                flat = flat_lenses(mosaic, pattern, pitch, noise, origin=origin, lens_weights=lens_weights,
+                                   statistics=statistics).flat
             malvar = Malvar(runtime, mosaic.shape, pattern, origin).forward(b)
-            x0, guard = guarded_start(runtime, x0, malvar, b, pitch, noise, depth=depth)
+            x0, guard = guarded_start(runtime, x0, malvar, b, pitch, noise, depth=depth, flat=flat)
             del malvar
     else:  # lens-malvar: Malvar bounded to each lens, so that no filter reads a neighbouring micro-image
         x0 = Malvar(runtime, mosaic.shape, pattern, origin, lens=pitch if start == "lens-malvar" else None).forward(b)
