@@ -10,7 +10,8 @@ import pytest
 from conftest import shared_path
 
 from lfcl.depth import badpix, candidates, depth_scores, estimate_disparity, mse100, read_pfm
-from lfcl.depth.cost import CostVolume, cost_volume_np, half_apertures
+from lfcl.depth.cost import CostVolume, colour_penalty_np, cost_volume_np, half_apertures, lens_colour_np
+from lfcl.depth.estimate import DEFAULTS
 from lfcl.noise.model import NoiseEstimate
 from lfcl.sim.capture import simulate
 from lfcl.sim.deadleaves import DeadLeavesTexture, _texture_box
@@ -22,14 +23,15 @@ TWIN_CASES = [(3, 4, 9, 9, "plane", (0, 0), None), (2, 5, 5, 4, "mean", (1, 0), 
               (3, 3, 9, 9, "plane", (0, 0), (4, 8, 0, 8))]
 
 
+@pytest.mark.parametrize("colour", [0.0, 0.5], ids=["no-colour-penalty", "colour-penalty"])
 @pytest.mark.parametrize("case", TWIN_CASES, ids=str)
-def test_device_cost_volume_matches_numpy(runtime, rng, case):
+def test_device_cost_volume_matches_numpy(runtime, rng, case, colour):
     S, T, U, V, model, origin, views = case
     mosaic = rng.uniform(0.05, 0.6, (S * U, T * V)).astype(np.float32)
     ds = np.array([-1.3, -1.0, -0.5, -0.05, 0.0, 0.35, 1.0, 2.0], np.float32)
     expected = cost_volume_np(mosaic, "GRBG", (U, V), ds, origin=origin, noise=(1e-3, 1e-4), saturation=0.55,
-                              model=model, views=views)
-    op = CostVolume(runtime, mosaic.shape, "GRBG", (U, V), ds, origin=origin, model=model)
+                              model=model, views=views, colour=colour)
+    op = CostVolume(runtime, mosaic.shape, "GRBG", (U, V), ds, origin=origin, model=model, colour=colour)
     got = op.forward(runtime.to_device(mosaic), (1e-3, 1e-4), 0.55, views).get()
     assert got.shape == (2, ds.size, S, T)
     scale = np.abs(expected).max()
@@ -40,13 +42,16 @@ def test_device_cost_volume_matches_numpy(runtime, rng, case):
 @pytest.mark.parametrize("S, T, U, V, model, origin", [(3, 4, 9, 9, "plane", (0, 0)), (2, 3, 4, 6, "mean", (1, 0)),
                                                      (2, 2, 1, 2, "plane", (0, 1)), (1, 1, 5, 3, "plane", (1, 1))],
                          ids=str)
-def test_device_half_apertures_in_one_gather_match_numpy(runtime, rng, S, T, U, V, model, origin):
+@pytest.mark.parametrize("colour", [0.0, 0.5], ids=["no-colour-penalty", "colour-penalty"])
+def test_device_half_apertures_in_one_gather_match_numpy(runtime, rng, S, T, U, V, model, origin, colour):
     mosaic = rng.uniform(0.05, 0.6, (S * U, T * V)).astype(np.float32)
     ds = np.array([-1.3, -0.5, 0.0, 0.35, 1.0], np.float32)
     apertures = [None, *half_apertures(U, V)]
     expected = np.stack([cost_volume_np(mosaic, "GRBG", (U, V), ds, origin=origin, noise=(1e-3, 1e-4),
-                                        saturation=0.55, model=model, views=views) for views in apertures])
-    op = CostVolume(runtime, mosaic.shape, "GRBG", (U, V), ds, origin=origin, model=model, halves=True)
+                                        saturation=0.55, model=model, views=views, colour=colour)
+                         for views in apertures])
+    op = CostVolume(runtime, mosaic.shape, "GRBG", (U, V), ds, origin=origin, model=model, halves=True,
+                    colour=colour)
     got = op.forward(runtime.to_device(mosaic), (1e-3, 1e-4), 0.55).get()
     assert got.shape == (5, 2, ds.size, S, T)
     np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-5 * np.abs(expected).max())
@@ -62,10 +67,13 @@ def test_device_half_apertures_in_one_gather_match_numpy(runtime, rng, S, T, U, 
     (16, 30, 9, 9, "plane", True, (0, 0), None), (12, 29, 5, 5, "plane", False, (1, 0), None),
     (10, 27, 4, 6, "mean", False, (0, 1), None), (12, 26, 5, 5, "plane", False, (0, 0), (1, 3, 0, 2)),
     (10, 27, 4, 6, "plane", True, (1, 1), None)], ids=str)
-def test_device_cost_volume_interior_box_matches_numpy(runtime, rng, S, T, U, V, model, halves, origin, views):
+@pytest.mark.parametrize("colour", [0.0, 0.5], ids=["no-colour-penalty", "colour-penalty"])
+def test_device_cost_volume_interior_box_matches_numpy(runtime, rng, S, T, U, V, model, halves, origin, views,
+                                                       colour):
     mosaic = rng.uniform(0.05, 0.5, (S * U, T * V)).astype(np.float32)
     ds = np.array([-1.3, -0.5, 0.0, 0.35, 1.0], np.float32)
-    op = CostVolume(runtime, mosaic.shape, "GRBG", (U, V), ds, origin=origin, model=model, halves=halves)
+    op = CostVolume(runtime, mosaic.shape, "GRBG", (U, V), ds, origin=origin, model=model, halves=halves,
+                    colour=colour)
     s0, s1, t0, t1 = op.box
     assert s1 > s0 and t1 - t0 >= 8, op.box
     # Two saturated samples: one inside the box, one in the edge ring.
@@ -73,7 +81,7 @@ def test_device_cost_volume_interior_box_matches_numpy(runtime, rng, S, T, U, V,
     mosaic[1, 2] = 0.99
     apertures = [None, *half_apertures(U, V)] if halves else [views]
     expected = np.stack([cost_volume_np(mosaic, "GRBG", (U, V), ds, origin=origin, noise=(1e-3, 1e-4),
-                                        saturation=0.9, model=model, views=a) for a in apertures])
+                                        saturation=0.9, model=model, views=a, colour=colour) for a in apertures])
     got = op.forward(runtime.to_device(mosaic), (1e-3, 1e-4), 0.9, None if halves else views).get()
     got = got if halves else got[None]
     np.testing.assert_allclose(got, expected, rtol=1e-4, atol=1e-5 * np.abs(expected).max())
@@ -101,6 +109,19 @@ def test_cost_volume_of_a_large_frame_matches_numpy_on_crops(runtime, rng):
                                         saturation=0.99, views=views)[..., s - r0, t - c0]
                          for views in [None, *half_apertures(9, 9)]])
         np.testing.assert_allclose(got[..., s, t], want, rtol=1e-4, atol=1e-5 * np.abs(want).max())
+
+
+def test_device_lens_colour_matches_numpy(runtime, rng):
+    S, T, U, V = 4, 5, 9, 9
+    mosaic = rng.uniform(0.1, 0.6, (S * U, T * V)).astype(np.float32)
+    mosaic[:U, :V] = 0.3 + 0.001 * rng.standard_normal((U, V))  # a grey lens
+    mosaic[U:2 * U:2, 2 * V + 1:3 * V:2] = 0.97  # every red sample of lens (1, 2) saturated: unknown
+    mosaic[3, 4 * V + 2] = 0.98  # one saturated sample: left out of that lens's means
+    op = CostVolume(runtime, mosaic.shape, "GRBG", (U, V), [0.0], origin=(1, 0), colour=0.5)
+    got = op.lens_colour(runtime.to_device(mosaic), (1e-5, 1e-6), 0.95).get()
+    want = lens_colour_np(mosaic, "GRBG", (U, V), origin=(1, 0), noise=(1e-5, 1e-6), saturation=0.95)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+    assert want[3, 0, 0] == 0.0 and want[3, 1, 2] == 2.0 and (want[3] == 1.0).sum() == S * T - 2
 
 
 def test_view_major_copy_and_unusable_lenses_match_numpy(runtime, rng):
@@ -205,6 +226,60 @@ def test_cost_is_zero_in_expectation_for_pure_noise(rng):
     assert np.all(np.abs(per_sample) < 0.1), per_sample
 
 
+def test_colour_penalty_counts_only_colour_the_lens_lacks(rng):
+    """The colour penalty (lfcl.depth.cost, module docstring) of hand-made means: none for the lens's own colour,
+    any multiple of it or a grey offset (its noise-only expectation subtracted, 1 dof left); a grey lens pays for
+    the candidate's colour; a candidate of one or two colours, or a lens of unknown colour, pays nothing."""
+    k = np.array([2e4, 4e4, 2e4])[:, None]  # W / nv: ~20 samples a colour at a noise variance of 1e-3
+    red = np.array([0.6, 0.2, 0.1, 1.0])[:, None]  # coloured
+    for means in ([0.6, 0.2, 0.1], [0.3, 0.1, 0.05], [0.7, 0.3, 0.2], [0.3 + 0.05, 0.1 + 0.05, 0.05 + 0.05]):
+        np.testing.assert_allclose(colour_penalty_np(np.array(means)[:, None], k, red), [-1.0], atol=1e-12)
+    grey = np.array([0.4, 0.4, 0.4, 0.0])[:, None]
+    magenta = np.array([0.9, 0.1, 0.9])[:, None]  # the checker's candidate at d = 2: R, B on white, G on black
+    want = (k[:, 0] * (magenta[:, 0] - (k[:, 0] * magenta[:, 0]).sum() / k.sum()) ** 2).sum() - 2.0
+    np.testing.assert_allclose(colour_penalty_np(magenta, k, grey), [want])
+    assert want > 1e3
+    np.testing.assert_allclose(colour_penalty_np(np.full((3, 1), 0.7), k, grey), [-2.0], atol=1e-12)
+    assert colour_penalty_np(magenta, np.array([[2.0], [0.0], [0.0]]), grey)[0] == 0.0
+    assert abs(colour_penalty_np(magenta, np.array([[2e4], [4e4], [0.0]]), red)[0]) < 1e-9  # 2 colours, 2 dof
+    assert colour_penalty_np(magenta, k, np.array([0.4, 0.4, 0.4, 2.0])[:, None])[0] == 0.0
+    # Numpy's lens colour: per-colour means of the unsaturated samples, its kind from their chi-square.
+    U = V = 4
+    mosaic = np.empty((2 * U, 3 * V), np.float32)
+    mosaic[:, :V] = 0.4  # grey
+    mosaic[:, V:2 * V] = np.where(np.arange(2 * U)[:, None] % 2 == 0, 0.6, 0.2) * np.ones((1, V))  # RGGB rows
+    mosaic[:, 2 * V:] = 0.4
+    mosaic[0::2, 2 * V::2] = 0.995  # every red sample of the third lens column saturated
+    lens = lens_colour_np(mosaic, "RGGB", (U, V), noise=(0.0, 1e-4), saturation=0.99)
+    np.testing.assert_allclose(lens[:, 0, 0], [0.4, 0.4, 0.4, 0.0], atol=1e-6)
+    np.testing.assert_allclose(lens[:, 0, 1], [0.6, 0.4, 0.2, 1.0], atol=1e-6)
+    assert lens[3, 0, 2] == 2.0
+
+
+def test_colour_penalty_breaks_the_in_focus_checkers_tie():
+    """A grey checkerboard of 2-lens squares in focus: the per-colour fits explain its samples exactly at d = 0 (grey)
+    and at d = +-2 (red and blue white, green black), and without the penalty noise chose among them (about a third
+    of the lenses each at 2 lux, confidence 0.06). With it, every lens takes d = 0, confidently (docs/depth.md)."""
+    from lfcl.evaluation.evaluate import simulation_capture
+    from lfcl.noise.model import from_noise_profile
+    from lfcl.sim.periodic import Checker
+    from lfcl.solvers.epi import epi_depth_options
+
+    capture = simulation_capture(simulate(planes=[Plane("checker", 0.0, Checker(2.0, (0.05,) * 3, (0.95,) * 3,
+                                                                                (0.3, 0.7)))],
+                                          lenses=(24, 24), lux=2, seed=3))
+    noise = from_noise_profile(capture.noise_profile, capture.mosaic)
+    options = epi_depth_options(noise.sigma)
+    found = {}
+    for colour in (0.0, options.get("colour", DEFAULTS["colour"])):
+        depth = estimate_disparity(capture.mosaic, capture.pattern, capture.pitch, noise=noise,
+                                   **{**options, "colour": colour})
+        inner = np.abs(depth.disparity[4:-4, 4:-4])
+        found[colour] = float(np.mean(inner < 0.1)), float(depth.confidence[4:-4, 4:-4].mean())
+    (share_off, _), (share_on, confidence_on) = found.values()
+    assert share_off < 0.6 and share_on > 0.99 and confidence_on > 0.9, found
+
+
 def two_planes(S, T, d_front, d_back, seed=0):
     """A dead-leaves square (d_front) over a dead-leaves background (d_back) and its true disparity map."""
     streams = np.random.SeedSequence([seed, 77]).spawn(2)
@@ -300,7 +375,8 @@ def test_non_finite_input_is_refused(bad, message):
 
 @pytest.mark.parametrize("kwargs, message", [
     ({"pitch": 7}, "whole number"), ({"pattern": "RGBX"}, "Bayer"), ({"step": 0}, "step"),
-    ({"radius": -1}, "radius"), ({"model": "cubic"}, "model"), ({"colour": 1}, "unknown disparity options")])
+    ({"radius": -1}, "radius"), ({"model": "cubic"}, "model"), ({"colour": -0.1}, "colour"),
+    ({"colour": np.nan}, "colour"), ({"hue": 1}, "unknown disparity options")])
 def test_bad_arguments_are_refused(kwargs, message):
     args = {"pattern": "GRBG", "pitch": 9}
     args.update({k: kwargs.pop(k) for k in list(kwargs) if k in args})

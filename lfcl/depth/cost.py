@@ -24,6 +24,21 @@ shares one row and column parity: one colour only; that colour's fit still count
 its own expectation). A colour with ``W_c < MIN_WEIGHT`` is left out. Samples at or above
 ``saturation`` are left out (a clipped sample is no measurement of the radiance).
 
+**The colour penalty** (``colour`` = eta > 0). The per-colour fits let a candidate explain the samples as a colour the
+scene does not have: an in-focus grey checker of 2-lens squares is fitted exactly at ``d = 0`` (grey) and at
+``d = +-2`` (red and blue white, green black: every line's colours fall on one square each), and the prior along the
+lines at ``+-2`` then paints that colour. So the candidate's weighted per-colour means ``m_c`` (weights
+``k_c = W_c / nv_c``) are compared with the lens's own colour ``r_c`` (the mean of each colour's samples in the
+lens's micro-image, :func:`lens_colour_np`): what no grey offset and no multiple of the lens's colour explains,
+
+    penalty = min_{alpha, beta} sum_c k_c (m_c - alpha r_c - beta)^2 - (n - 1 - [alpha fitted]),
+
+``n`` the kept colours (at most 1 dof is left of 3; none with 2 or fewer, so a one-colour candidate has none), less
+its noise-only expectation; ``alpha`` is fitted only where the lens's colour differs from grey by more than
+``COLOURED_CHI2`` (its chi-square in noise units, 2 dof: about 1 % of grey lenses by chance), and a lens with a
+colour it has no unsaturated sample of has no penalty. ``excess += colour * penalty``. At ``d = 0`` the candidate
+gathers the lens's own samples: no penalty; the true ``d`` of a uniformly coloured patch: none either.
+
 The plane (``model="plane"``) removes the first-order texture inside the gather footprint, which
 otherwise biases the cost towards integer ``d`` (where the footprint shrinks to one lens);
 ``model="mean"`` fits the mean only.
@@ -44,6 +59,8 @@ MIN_WEIGHT = 1.5
 MODELS = {"mean": 0, "plane": 1}
 # Variance floor (normalised units^2) so that a noise model of 0 never divides by 0.
 MIN_VARIANCE = 1e-12
+# The lens's colour counts as coloured (its multiple is fitted by the colour penalty) above this chi-square.
+COLOURED_CHI2 = 9.0
 
 
 def _parse_model(model: str) -> int:
@@ -77,9 +94,51 @@ def _taps(d, offset):
     return np.floor(shift), shift - np.floor(shift)
 
 
-def _solve_stats(acc, ref, gain, floor, plane: bool):
+def lens_colour_np(mosaic, pattern: str, pitch, *, origin=(0, 0), noise=(0.0, 1.0),
+                   saturation: float = np.inf) -> np.ndarray:
+    """The lens's own colour for the colour penalty: ``[4, S, T]`` float32, the mean of each colour's unsaturated
+    samples in the micro-image (R, G, B), then its kind: 2 (unknown) where a colour has no such sample, 1 (coloured)
+    where the three means differ from one grey by more than :data:`COLOURED_CHI2` (chi-square, each mean's
+    variance ``nv / n``), else 0. The twin of lfcl/kernels/depth.cl ``depth_lens_colour``."""
+    mosaic = np.asarray(mosaic, dtype=np.float64)
+    U, V, S, T = _checks.grid(mosaic.shape, pitch)
+    gain, floor = (float(n) for n in noise)
+    cells = pattern_channels(pattern, origin)
+    channel = cells[(np.arange(S * U) % 2)[:, None], (np.arange(T * V) % 2)[None, :]]
+    usable = mosaic < saturation
+    out = np.zeros((4, S, T))
+    n = np.stack([((channel == c) & usable).reshape(S, U, T, V).sum(axis=(1, 3)) for c in range(3)])
+    for c in range(3):
+        total = np.where((channel == c) & usable, mosaic, 0.0).reshape(S, U, T, V).sum(axis=(1, 3))
+        out[c] = np.where(n[c] > 0, total / np.maximum(n[c], 1), 0.0)
+    w = n / np.maximum(gain * np.maximum(out[:3], 0.0) + floor, MIN_VARIANCE)
+    grey = (w * out[:3]).sum(axis=0) / np.maximum(w.sum(axis=0), MIN_VARIANCE)
+    chi = (w * (out[:3] - grey) ** 2).sum(axis=0)
+    out[3] = np.where((n == 0).any(axis=0), 2.0, np.where(chi > COLOURED_CHI2, 1.0, 0.0))
+    return out.astype(np.float32)
+
+
+def colour_penalty_np(means, k, lens) -> np.ndarray:
+    """The colour penalty (module docstring) per lens: ``means`` [3, ...] the candidate's per-colour means, ``k``
+    [3, ...] their weights ``W / nv`` (0: the colour is not kept), ``lens`` [4, ...] :func:`lens_colour_np`'s."""
+    kept = k > 0
+    n = kept.sum(axis=0)
+    K = np.maximum(k.sum(axis=0), MIN_VARIANCE)
+    r = lens[:3]
+    dm = np.where(kept, means - (k * means).sum(axis=0) / K, 0.0)
+    dr = np.where(kept, r - (k * r).sum(axis=0) / K, 0.0)
+    rr = (k * dr * dr).sum(axis=0)
+    fit = (lens[3] > 0.5) & (lens[3] < 1.5) & (rr > 0)
+    alpha = np.where(fit, (k * dm * dr).sum(axis=0) / np.where(rr > 0, rr, 1.0), 0.0)
+    e = dm - alpha * dr
+    penalty = (k * e * e).sum(axis=0) - (n - 1 - fit)
+    return np.where((n >= 2) & (lens[3] < 1.5), penalty, 0.0)
+
+
+def _solve_stats(acc, ref, gain, floor, plane: bool, colour: float = 0.0, lens=None):
     """excess and weight from the per-colour sums ``acc[16, 3, ...]`` of values less ``ref`` (see
-    :func:`cost_volume_np`)."""
+    :func:`cost_volume_np`); ``colour`` > 0 adds that times the colour penalty against ``lens``
+    (:func:`lens_colour_np`)."""
     W, Sy, Sx, Syy, Sxx, Syx, M, My, Mx, X, Q, Qy, Qx, Qyy, Qxx, Qyx = acc
     keep = W >= MIN_WEIGHT
     Wsafe = np.where(keep, W, 1.0)
@@ -99,17 +158,20 @@ def _solve_stats(acc, ref, gain, floor, plane: bool):
         trace = Q / Wsafe
     excess = np.where(keep, rss / nv - (W - trace), 0.0).sum(axis=0)
     weight = np.where(keep, W, 0.0).sum(axis=0)
+    if colour > 0:
+        excess = excess + colour * colour_penalty_np(M / Wsafe + ref, np.where(keep, W / nv, 0.0), lens)
     return excess, weight
 
 
 def cost_volume_np(mosaic, pattern: str, pitch, disparities, *, origin=(0, 0), noise=(0.0, 1.0),
-                   saturation: float = np.inf, model: str = "plane", views=None) -> np.ndarray:
+                   saturation: float = np.inf, model: str = "plane", views=None, colour: float = 0.0) -> np.ndarray:
     """The cost volume ``[2, ND, S, T]`` (excess, weight; module docstring) in float64, as float32.
 
     ``mosaic`` [S*U, T*V] (whole lenses), ``pattern`` a Bayer name, ``origin`` the sensor
     (row, col) of its first pixel, ``disparities`` [ND], ``noise`` ``(gain, floor)`` of the
     Poisson-Gaussian model ``var = gain * x + floor`` (normalised units), ``views``
-    ``(u_lo, u_hi, v_lo, v_hi)`` (inclusive; None: all) the views gathered.
+    ``(u_lo, u_hi, v_lo, v_hi)`` (inclusive; None: all) the views gathered, ``colour`` the colour penalty's
+    weight (0: none).
     """
     mosaic = np.asarray(mosaic, dtype=np.float64)
     U, V, S, T = _checks.grid(mosaic.shape, pitch)
@@ -125,6 +187,9 @@ def cost_volume_np(mosaic, pattern: str, pitch, disparities, *, origin=(0, 0), n
     uc, vc = (U - 1) / 2.0, (V - 1) / 2.0
     u_lo, u_hi, v_lo, v_hi = _views(views, U, V)
     out = np.zeros((2, disparities.size, S, T), np.float64)
+    eta = float(colour)  # (`colour` names each sample's CFA colour below)
+    lens = lens_colour_np(mosaic, pattern, (U, V), origin=origin, noise=noise, saturation=saturation) \
+        if eta > 0 else None
     s_idx, t_idx = np.arange(S), np.arange(T)
     for k, d in enumerate(disparities):
         acc = np.zeros((16, 3, S, T))
@@ -160,7 +225,7 @@ def cost_volume_np(mosaic, pattern: str, pitch, disparities, *, origin=(0, 0), n
                             sel = colour == c
                             for j, f in enumerate(feats):
                                 acc[j, c] += np.where(sel, f, 0.0)
-        out[0, k], out[1, k] = _solve_stats(acc, ref, gain, floor, plane)
+        out[0, k], out[1, k] = _solve_stats(acc, ref, gain, floor, plane, eta, lens)
     return out.astype(np.float32)
 
 
@@ -230,8 +295,11 @@ class CostVolume:
     (docs/depth.md, "Timing")."""
 
     def __init__(self, runtime, sensor_shape, pattern: str, pitch, disparities, *, origin=(0, 0),
-                 model: str = "plane", halves: bool = False):
+                 model: str = "plane", halves: bool = False, colour: float = 0.0):
         self.runtime = runtime
+        self.colour = float(colour)
+        if not (np.isfinite(self.colour) and self.colour >= 0):
+            raise ValueError(f"the colour penalty's weight must be a finite number >= 0, got {colour!r}")
         self.U, self.V, self.S, self.T = _checks.grid(tuple(int(n) for n in sensor_shape), pitch)
         self.sensor_shape = (self.S * self.U, self.T * self.V)
         self.pattern = packed_pattern(pattern, origin)
@@ -272,6 +340,14 @@ class CostVolume:
                             np.int32(self.S), np.int32(self.T), np.float32(saturation), defines=self._defines())
         return flags.get().astype(bool)
 
+    def lens_colour(self, mosaic, noise, saturation):
+        """``[4, S, T]`` device array: the lens's own colour and its kind (the twin: :func:`lens_colour_np`)."""
+        out = self.runtime.empty((4, self.S, self.T))
+        self.runtime.launch("depth", "depth_lens_colour", (self.T, self.S), mosaic.data, out.data, np.int32(self.S),
+                            np.int32(self.T), self.pattern, np.float32(noise[0]), np.float32(noise[1]),
+                            np.float32(saturation), np.float32(COLOURED_CHI2), defines=self._defines())
+        return out
+
     def _listed(self, mosaic, saturation):
         """Flat indices (s T + t) of the lenses for depth_cost: outside the box, or reaching an unusable sample."""
         S, T = self.S, self.T
@@ -308,6 +384,9 @@ class CostVolume:
         S, T, ND = self.S, self.T, self.disparities.size
         common = (np.int32(S), np.int32(T), np.int32(ND), self.pattern, np.float32(gain), np.float32(floor))
         view_range = (np.int32(u_lo), np.int32(u_hi), np.int32(v_lo), np.int32(v_hi))
+        # The lens's colour for the colour penalty (without it the kernels read nothing of this buffer).
+        lens = self.lens_colour(mosaic, (gain, floor), sat) if self.colour > 0 else self.runtime.empty((4,))
+        penalty = (lens.data, np.float32(self.colour))
         s0, s1, t0, t1 = self.box
         if s1 > s0 and t1 > t0:
             key = (u_lo, u_hi, v_lo, v_hi)
@@ -319,14 +398,15 @@ class CostVolume:
             self.runtime.launch("depth", "depth_cost_interior", _whole_groups(((t1 - t0) // COST_LANES, s1 - s0, ND),
                                                                            COST_GROUP),
                                 view_major.data, self._disparities.data, self._geometry[key].data, out.data, *common,
-                                np.int32(s0), np.int32(t0), np.int32(s1), np.int32(t1), *view_range,
+                                np.int32(s0), np.int32(t0), np.int32(s1), np.int32(t1), *view_range, *penalty,
                                 local_size=COST_GROUP, defines=self._defines())
         listed = self._listed(mosaic, sat)
         if listed.size:
             lenses = self.runtime.to_device(listed)
             self.runtime.launch("depth", "depth_cost", _whole_groups((listed.size, ND), COST_GROUP[:2]),
                                 mosaic.data, self._disparities.data, lenses.data, out.data, np.int32(listed.size),
-                                *common, sat, *view_range, local_size=COST_GROUP[:2], defines=self._defines())
+                                *common, sat, *view_range, *penalty, local_size=COST_GROUP[:2],
+                                defines=self._defines())
         return out
 
 

@@ -62,6 +62,7 @@ DEFAULTS = {
     "exclusion": 0.25,  # the confidence compares the best cost with the lowest one this far away
     "confidence_z": 4.0,  # distinctiveness (noise units) at which the confidence reaches 1 - 1/e
     "occlusion": True,  # also try the four half apertures (top, bottom, left, right views) per lens
+    "colour": 0.03,  # the colour penalty's weight (lfcl.depth.cost): a candidate pays for colour its lens lacks; 0: off
     "backend": "device",  # "device" (lfcl/kernels/depth.cl) or "numpy" (the float64 twin)
 }
 
@@ -133,7 +134,7 @@ def _options(options: dict) -> dict:
                 or not np.isfinite(value) or value <= 0:
             raise ValueError(f"disparity option {name} must be a finite number > 0, got {value!r}")
         out[name] = float(value)
-    for name in ("smooth", "exclusion"):
+    for name in ("smooth", "exclusion", "colour"):
         value = out[name]
         if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
                 or not np.isfinite(value) or value < 0:
@@ -391,7 +392,8 @@ def estimate_disparity(mosaic, pattern, pitch, *, origin=(0, 0), noise=None, dev
         for index, views in enumerate(subsets):  # one aperture at a time
             start = time.perf_counter()
             volume = cost_volume_np(mosaic, pattern, (U, V), ds, origin=origin, noise=(gain, floor),
-                                    saturation=opts["saturation"], model=opts["model"], views=views)
+                                    saturation=opts["saturation"], model=opts["model"], views=views,
+                                    colour=opts["colour"])
             if index == 0:
                 seen = volume[1].max(axis=0) > 0  # lenses that gathered any sample (the full aperture)
             best = take_aperture_np(best, aggregate_window_np(volume[0], offsets, wwin),
@@ -404,7 +406,7 @@ def estimate_disparity(mosaic, pattern, pitch, *, origin=(0, 0), noise=None, dev
         start = time.perf_counter()
         runtime = get_runtime(device)
         op = CostVolume(runtime, mosaic.shape, pattern, (U, V), ds, origin=origin, model=opts["model"],
-                        halves=opts["occlusion"])
+                        halves=opts["occlusion"], colour=opts["colour"])
         window = WindowAggregate(runtime, 2 * ds.size, (S, T), opts["radius"])
         data = runtime.to_device(mosaic)
         weights = window.weights(guide, _guide_scale(guide, opts["guide_sigma"], gain, floor))

@@ -8,6 +8,9 @@
 // least-squares plane a + g.p (ridge RIDGE * W on g; PLANE_MODEL=0: the mean only), then
 //   excess = sum_c RSS_c / nv_c - (W_c - tr((A_c + R_c)^-1 B_c)),   weight = sum_c W_c.
 // Values are taken relative to the lens's own centre pixel (conditioning in float32 only).
+// With eta > 0 the excess also holds eta times the colour penalty (lfcl/depth/cost.py, "The colour penalty"):
+// how far the candidate's per-colour means lie from the span of grey and the lens's own colour
+// (colour[4][S][T] from depth_lens_colour), in noise units, less its noise-only expectation.
 //
 // Build-time constants: PITCH_U, PITCH_V, PLANE_MODEL (0/1), RIDGE_PPM and MIN_WEIGHT_PPM (the
 // ridge factor and the smallest colour weight kept, in millionths), HALVES (0/1).
@@ -46,16 +49,54 @@ inline int2 region_views(const int r, const int n, const int lo, const int hi)
 #endif
 }
 
-// excess and weight of one aperture's per-colour sums (values less ref).
-inline float2 aperture_cost(float acc[3][NSUM], const float ref, const float gain, const float floor_var)
+// The colour penalty of one aperture (lfcl.depth.cost.colour_penalty_np): the kept colours' means m (less ref),
+// their weights k = W / nv, the lens's own colour r (less ref) and its kind (0 grey, 1 coloured, 2 unknown).
+inline float colour_penalty(const float m[3], const float k[3], const float r[3], const float kind)
+{
+    float K = 0.0f, km = 0.0f, kr = 0.0f;
+    int n = 0;
+    for (int c = 0; c < 3; ++c)
+        if (k[c] > 0.0f) {
+            K += k[c];
+            km += k[c] * m[c];
+            kr += k[c] * r[c];
+            ++n;
+        }
+    if (n < 2 || !(kind < 1.5f))
+        return 0.0f;
+    const float mbar = km / K, rbar = kr / K;
+    float mr = 0.0f, rr = 0.0f;
+    for (int c = 0; c < 3; ++c)
+        if (k[c] > 0.0f) {
+            mr += k[c] * (m[c] - mbar) * (r[c] - rbar);
+            rr += k[c] * (r[c] - rbar) * (r[c] - rbar);
+        }
+    const int fit = kind > 0.5f && rr > 0.0f;
+    const float alpha = fit ? mr / rr : 0.0f;
+    float penalty = 0.0f;
+    for (int c = 0; c < 3; ++c)
+        if (k[c] > 0.0f) {
+            const float e = (m[c] - mbar) - alpha * (r[c] - rbar);
+            penalty += k[c] * e * e;
+        }
+    return penalty - (float)(n - 1 - fit);
+}
+
+// excess and weight of one aperture's per-colour sums (values less ref); eta > 0 adds the colour penalty against
+// the lens's colour `lens` (r_R, r_G, r_B, kind; absolute values).
+inline float2 aperture_cost(float acc[3][NSUM], const float ref, const float gain, const float floor_var,
+                            const float eta, const float4 lens)
 {
     float excess = 0.0f, weight = 0.0f;
+    float m[3] = {0.0f, 0.0f, 0.0f}, k[3] = {0.0f, 0.0f, 0.0f};
     for (int c = 0; c < 3; ++c) {
         const float Wc = acc[c][0];
         if (!(Wc >= MIN_WEIGHT))
             continue;
         const float mean = acc[c][6] / Wc + ref;  // the sums are of values less ref
         const float nv = fmax(gain * fmax(mean, 0.0f) + floor_var, 1e-12f);
+        m[c] = acc[c][6] / Wc;
+        k[c] = Wc / nv;
         float rss, trace;
 #if PLANE_MODEL
         const float r = RIDGE * Wc;
@@ -85,13 +126,55 @@ inline float2 aperture_cost(float acc[3][NSUM], const float ref, const float gai
         excess += rss / nv - (Wc - trace);
         weight += Wc;
     }
+    if (eta > 0.0f) {
+        const float r[3] = {lens.x - ref, lens.y - ref, lens.z - ref};
+        excess += eta * colour_penalty(m, k, r, lens.w);
+    }
     return (float2)(excess, weight);
+}
+
+// The lens's colour for the penalty: [4][S][T] = the means of its own unsaturated samples per colour, then its kind:
+// 2 (unknown) if a colour has no such sample, else 1 (coloured) if the means differ from one grey by more than
+// chi2 (their chi-square in noise units, the variance of a mean nv / n), else 0. Global size (T, S).
+__kernel void depth_lens_colour(__global const float *mosaic, __global float *colour, const int S, const int T,
+                                const int pattern, const float gain, const float floor_var, const float saturation,
+                                const float chi2)
+{
+    const int t = get_global_id(0), s = get_global_id(1);
+    if (t >= T || s >= S)
+        return;
+    float sum[3] = {0.0f, 0.0f, 0.0f};
+    int n[3] = {0, 0, 0};
+    for (int u = 0; u < PITCH_U; ++u)
+        for (int v = 0; v < PITCH_V; ++v) {
+            const int row = s * PITCH_U + u, col = t * PITCH_V + v;
+            const float raw = mosaic[(size_t)row * T * PITCH_V + col];
+            if (!(raw < saturation))
+                continue;
+            const int c = bayer_colour(row, col, pattern);
+            sum[c] += raw;
+            n[c] += 1;
+        }
+    const size_t plane = (size_t)S * T, at = (size_t)s * T + t;
+    float mean[3], w[3], W = 0.0f, wm = 0.0f;
+    for (int c = 0; c < 3; ++c) {
+        mean[c] = n[c] > 0 ? sum[c] / (float)n[c] : 0.0f;
+        w[c] = (float)n[c] / fmax(gain * fmax(mean[c], 0.0f) + floor_var, 1e-12f);
+        W += w[c];
+        wm += w[c] * mean[c];
+        colour[c * plane + at] = mean[c];
+    }
+    float chi = 0.0f;
+    for (int c = 0; c < 3; ++c)
+        chi += w[c] * (mean[c] - wm / W) * (mean[c] - wm / W);
+    colour[3 * plane + at] = (n[0] == 0 || n[1] == 0 || n[2] == 0) ? 2.0f : (chi > chi2 ? 1.0f : 0.0f);
 }
 
 __kernel void depth_cost(__global const float *mosaic, __constant float *disparities, __global const int *lenses,
                          __global float *cost, const int count, const int S, const int T, const int ND,
                          const int pattern, const float gain, const float floor_var, const float saturation,
-                         const int u_lo, const int u_hi, const int v_lo, const int v_hi)
+                         const int u_lo, const int u_hi, const int v_lo, const int v_hi,
+                         __global const float *colour, const float eta)
 {
     const int i = get_global_id(0);
     const int k = get_global_id(1);
@@ -181,8 +264,11 @@ __kernel void depth_cost(__global const float *mosaic, __constant float *dispari
     }
 
     const size_t plane = (size_t)S * T;
+    const size_t at = (size_t)s * T + t;
+    const float4 lens = eta > 0.0f ? (float4)(colour[at], colour[plane + at], colour[2 * plane + at],
+                                              colour[3 * plane + at]) : (float4)(0.0f);
     for (int a = 0; a < NSUB; ++a) {
-        const float2 ew = aperture_cost(total[a], ref, gain, floor_var);
+        const float2 ew = aperture_cost(total[a], ref, gain, floor_var, eta, lens);
         cost[((size_t)a * 2 * ND + k) * plane + s * T + t] = ew.x;
         cost[((size_t)a * 2 * ND + ND + k) * plane + s * T + t] = ew.y;
     }
@@ -206,7 +292,7 @@ __kernel void depth_cost_interior(__global const float *views, __constant float 
                                   const int S, const int T, const int ND, const int pattern,
                                   const float gain, const float floor_var, const int s_lo, const int t_lo,
                                   const int s_hi, const int t_hi, const int u_lo, const int u_hi, const int v_lo,
-                                  const int v_hi)
+                                  const int v_hi, __global const float *colour, const float eta)
 {
     const int t0 = t_lo + COST_LANES * get_global_id(0);
     const int s = s_lo + get_global_id(1);
@@ -297,7 +383,10 @@ __kernel void depth_cost_interior(__global const float *views, __constant float 
                 for (int j = 0; j < 4; ++j)
                     total[c][6 + j] = sums[c][j][lane];
             }
-            const float2 ew = aperture_cost(total, refs[lane], gain, floor_var);
+            const size_t at = lens + lane;
+            const float4 own = eta > 0.0f ? (float4)(colour[at], colour[plane + at], colour[2 * plane + at],
+                                                     colour[3 * plane + at]) : (float4)(0.0f);
+            const float2 ew = aperture_cost(total, refs[lane], gain, floor_var, eta, own);
             cost[((size_t)a * 2 * ND + k) * plane + lens + lane] = ew.x;
             cost[((size_t)a * 2 * ND + ND + k) * plane + lens + lane] = ew.y;
         }
