@@ -280,6 +280,40 @@ def test_colour_penalty_breaks_the_in_focus_checkers_tie():
     assert share_off < 0.6 and share_on > 0.99 and confidence_on > 0.9, found
 
 
+def _pure_colour_lenses():
+    """A noise-free GRBG mosaic of 6x6 lenses of 9x9 in a checkerboard of pure red and pure blue lenses whose lit
+    channel is clipped (1.0), the other samples dark (0.02; each lens's centre pixel, the cost's reference, green)."""
+    S = T = 6
+    red_lens = np.repeat(np.repeat(np.add.outer(np.arange(S), np.arange(T)) % 2 == 0, 9, 0), 9, 1)
+    rows, cols = np.arange(9 * S) % 2, np.arange(9 * T) % 2
+    mosaic = np.full((9 * S, 9 * T), 0.02, np.float32)
+    mosaic[(rows[:, None] == 0) & (cols[None, :] == 1) & red_lens] = 1.0
+    mosaic[(rows[:, None] == 1) & (cols[None, :] == 0) & ~red_lens] = 1.0
+    return mosaic
+
+
+def test_clipped_samples_bound_the_fit_from_below(runtime):
+    """Pure red and blue lenses whose lit channel clips: with the clipped samples left out, a candidate whose lines
+    cross from a red lens into its blue neighbours (d = 0.5) explains the dark samples as well as d = 0 (the red
+    lens's own), and the clipped red samples it also gathers say nothing. Their bound (lfcl.depth.cost, "Clipped
+    samples") makes it pay; d = 0, whose red samples are all clipped, pays nothing. Device and twin agree both ways."""
+    mosaic = _pure_colour_lenses()
+    ds = np.array([0.0, 0.5], np.float32)
+    for clipped in (True, False):
+        want = cost_volume_np(mosaic, "GRBG", 9, ds, noise=(1e-3, 1e-5), saturation=0.99, clipped=clipped)
+        got = CostVolume(runtime, mosaic.shape, "GRBG", 9, ds, clipped=clipped).forward(
+            runtime.to_device(mosaic), (1e-3, 1e-5), 0.99).get()
+        # atol: noise-free samples 0.98 away from a lens's reference pixel (clipped where the centre pixel is the lit
+        # colour) cancel to within ~0.7 noise units in float32, with or without the bound.
+        np.testing.assert_allclose(got, want, rtol=1e-4, atol=1.0)
+        rise = want[0, 1] - want[0, 0]  # excess at d = 0.5 less that at d = 0, per lens
+        inner = rise[2:4, 2:4]
+        if clipped:
+            assert inner.min() > 1000, inner
+        else:
+            assert np.abs(inner).max() < 10, inner
+
+
 def two_planes(S, T, d_front, d_back, seed=0):
     """A dead-leaves square (d_front) over a dead-leaves background (d_back) and its true disparity map."""
     streams = np.random.SeedSequence([seed, 77]).spawn(2)
@@ -376,7 +410,7 @@ def test_non_finite_input_is_refused(bad, message):
 @pytest.mark.parametrize("kwargs, message", [
     ({"pitch": 7}, "whole number"), ({"pattern": "RGBX"}, "Bayer"), ({"step": 0}, "step"),
     ({"radius": -1}, "radius"), ({"model": "cubic"}, "model"), ({"colour": -0.1}, "colour"),
-    ({"colour": np.nan}, "colour"), ({"hue": 1}, "unknown disparity options")])
+    ({"colour": np.nan}, "colour"), ({"clipped": 1}, "clipped"), ({"hue": 1}, "unknown disparity options")])
 def test_bad_arguments_are_refused(kwargs, message):
     args = {"pattern": "GRBG", "pitch": 9}
     args.update({k: kwargs.pop(k) for k in list(kwargs) if k in args})

@@ -22,7 +22,17 @@ is an unbiased measure of how badly ``d`` explains the samples, in noise units, 
 number of samples of each colour (at odd integer ``d`` every sample that lands on a lens
 shares one row and column parity: one colour only; that colour's fit still counts, with
 its own expectation). A colour with ``W_c < MIN_WEIGHT`` is left out. Samples at or above
-``saturation`` are left out (a clipped sample is no measurement of the radiance).
+``saturation`` are left out of the fit (a clipped sample is no measurement of the radiance).
+
+**Clipped samples** still say something: the radiance there is at least ``saturation``. A candidate whose line
+gathers clipped samples of a colour together with unclipped ones far below the clip (a pure red lens's clipped red
+samples and the next, blue, lens's dark red ones, on a line that crosses both) is wrong, and without this every
+candidate explained a lens whose one colour clips: only its dark colours were fitted. So each colour with a fit pays
+``W_clip,c * max(saturation - f_c - sd, 0)^2 / nv(saturation)``, ``W_clip,c`` the weight of its clipped samples
+gathered, ``f_c`` the colour's fitted plane at their weighted mean place (its mean for ``model="mean"``; texture that
+rises into the clip is no conflict) and ``sd = sqrt(nv(saturation))`` one sample's noise at the clip (a fit near the
+clip, whose unclipped samples are biased low, pays nothing). A colour with only clipped samples pays nothing. ``clipped=False`` leaves
+the bound out.
 
 **The colour penalty** (``colour`` = eta > 0). The per-colour fits let a candidate explain the samples as a colour the
 scene does not have: an in-focus grey checker of 2-lens squares is fitted exactly at ``d = 0`` (grey) and at
@@ -135,10 +145,12 @@ def colour_penalty_np(means, k, lens) -> np.ndarray:
     return np.where((n >= 2) & (lens[3] < 1.5), penalty, 0.0)
 
 
-def _solve_stats(acc, ref, gain, floor, plane: bool, colour: float = 0.0, lens=None):
+def _solve_stats(acc, ref, gain, floor, plane: bool, colour: float = 0.0, lens=None, clipped=None,
+                 saturation: float = np.inf):
     """excess and weight from the per-colour sums ``acc[16, 3, ...]`` of values less ``ref`` (see
     :func:`cost_volume_np`); ``colour`` > 0 adds that times the colour penalty against ``lens``
-    (:func:`lens_colour_np`)."""
+    (:func:`lens_colour_np`); ``clipped`` [3 (sum w, sum w p_y, sum w p_x), 3 colours, ...] of the clipped samples
+    adds their bound (module docstring)."""
     W, Sy, Sx, Syy, Sxx, Syx, M, My, Mx, X, Q, Qy, Qx, Qyy, Qxx, Qyx = acc
     keep = W >= MIN_WEIGHT
     Wsafe = np.where(keep, W, 1.0)
@@ -153,25 +165,37 @@ def _solve_stats(acc, ref, gain, floor, plane: bool, colour: float = 0.0, lens=N
         Ainv = np.linalg.inv(A)
         rss = X - np.einsum("...i,...ij,...j->...", b, Ainv, b)
         trace = np.einsum("...ij,...ji->...", Ainv, B)
+        coef = np.einsum("...ij,...j->i...", Ainv, b)  # the plane: value less ref, slopes along p_y, p_x
     else:
         rss = X - M * M / Wsafe
         trace = Q / Wsafe
+        coef = None
     excess = np.where(keep, rss / nv - (W - trace), 0.0).sum(axis=0)
     weight = np.where(keep, W, 0.0).sum(axis=0)
+    if clipped is not None and np.isfinite(saturation):
+        Wc = clipped[0]
+        fit = M / Wsafe + ref
+        if coef is not None:  # the plane at the clipped samples' weighted mean place
+            at = np.where(Wc > 0, 1.0 / np.where(Wc > 0, Wc, 1.0), 0.0)
+            fit = ref + coef[0] + coef[1] * clipped[1] * at + coef[2] * clipped[2] * at
+        nv_clip = max(gain * max(saturation, 0.0) + floor, MIN_VARIANCE)
+        gap = np.maximum(saturation - fit - np.sqrt(nv_clip), 0.0)
+        excess = excess + np.where(keep & (Wc > 0), Wc * gap * gap / nv_clip, 0.0).sum(axis=0)
     if colour > 0:
         excess = excess + colour * colour_penalty_np(M / Wsafe + ref, np.where(keep, W / nv, 0.0), lens)
     return excess, weight
 
 
 def cost_volume_np(mosaic, pattern: str, pitch, disparities, *, origin=(0, 0), noise=(0.0, 1.0),
-                   saturation: float = np.inf, model: str = "plane", views=None, colour: float = 0.0) -> np.ndarray:
+                   saturation: float = np.inf, model: str = "plane", views=None, colour: float = 0.0,
+                   clipped: bool = True) -> np.ndarray:
     """The cost volume ``[2, ND, S, T]`` (excess, weight; module docstring) in float64, as float32.
 
     ``mosaic`` [S*U, T*V] (whole lenses), ``pattern`` a Bayer name, ``origin`` the sensor
     (row, col) of its first pixel, ``disparities`` [ND], ``noise`` ``(gain, floor)`` of the
     Poisson-Gaussian model ``var = gain * x + floor`` (normalised units), ``views``
     ``(u_lo, u_hi, v_lo, v_hi)`` (inclusive; None: all) the views gathered, ``colour`` the colour penalty's
-    weight (0: none).
+    weight (0: none), ``clipped`` whether clipped samples bound their colour's fit from below (module docstring).
     """
     mosaic = np.asarray(mosaic, dtype=np.float64)
     U, V, S, T = _checks.grid(mosaic.shape, pitch)
@@ -193,6 +217,7 @@ def cost_volume_np(mosaic, pattern: str, pitch, disparities, *, origin=(0, 0), n
     s_idx, t_idx = np.arange(S), np.arange(T)
     for k, d in enumerate(disparities):
         acc = np.zeros((16, 3, S, T))
+        clipped_sums = np.zeros((3, 3, S, T))  # per colour, the clipped samples gathered: sum w, w p_y, w p_x
         for u in range(u_lo, u_hi + 1):
             y0, fy = _taps(d, u - uc)  # the taps' floor and fraction as the kernels compute them
             y0, fy = s_idx + y0, np.full(S, fy)
@@ -213,7 +238,8 @@ def cost_volume_np(mosaic, pattern: str, pitch, disparities, *, origin=(0, 0), n
                         tpc = np.clip(tp, 0, T - 1)
                         raw = m4[spc[:, None], u, tpc[None, :], v]
                         value = raw - ref
-                        w = (wy[:, None] * wx[None, :]) * (vs[:, None] & vt[None, :]) * (raw < saturation)
+                        tap = (wy[:, None] * wx[None, :]) * (vs[:, None] & vt[None, :])
+                        w = tap * (raw < saturation)
                         colour = cells[rows[spc, u][:, None], cols[tpc, v][None, :]]
                         pyb = np.broadcast_to(py[:, None], w.shape)
                         pxb = np.broadcast_to(px[None, :], w.shape)
@@ -225,7 +251,11 @@ def cost_volume_np(mosaic, pattern: str, pitch, disparities, *, origin=(0, 0), n
                             sel = colour == c
                             for j, f in enumerate(feats):
                                 acc[j, c] += np.where(sel, f, 0.0)
-        out[0, k], out[1, k] = _solve_stats(acc, ref, gain, floor, plane, eta, lens)
+                            hit = sel & (raw >= saturation)
+                            for j, f in enumerate((tap, tap * pyb, tap * pxb)):
+                                clipped_sums[j, c] += np.where(hit, f, 0.0)
+        out[0, k], out[1, k] = _solve_stats(acc, ref, gain, floor, plane, eta, lens,
+                                            clipped_sums if clipped else None, saturation)
     return out.astype(np.float32)
 
 
@@ -295,8 +325,9 @@ class CostVolume:
     (docs/depth.md, "Timing")."""
 
     def __init__(self, runtime, sensor_shape, pattern: str, pitch, disparities, *, origin=(0, 0),
-                 model: str = "plane", halves: bool = False, colour: float = 0.0):
+                 model: str = "plane", halves: bool = False, colour: float = 0.0, clipped: bool = True):
         self.runtime = runtime
+        self.clipped = bool(clipped)
         self.colour = float(colour)
         if not (np.isfinite(self.colour) and self.colour >= 0):
             raise ValueError(f"the colour penalty's weight must be a finite number >= 0, got {colour!r}")
@@ -405,7 +436,7 @@ class CostVolume:
             lenses = self.runtime.to_device(listed)
             self.runtime.launch("depth", "depth_cost", _whole_groups((listed.size, ND), COST_GROUP[:2]),
                                 mosaic.data, self._disparities.data, lenses.data, out.data, np.int32(listed.size),
-                                *common, sat, *view_range, *penalty, local_size=COST_GROUP[:2],
+                                *common, sat, *view_range, *penalty, np.int32(self.clipped), local_size=COST_GROUP[:2],
                                 defines=self._defines())
         return out
 

@@ -63,6 +63,7 @@ DEFAULTS = {
     "confidence_z": 4.0,  # distinctiveness (noise units) at which the confidence reaches 1 - 1/e
     "occlusion": True,  # also try the four half apertures (top, bottom, left, right views) per lens
     "colour": 0.03,  # the colour penalty's weight (lfcl.depth.cost): a candidate pays for colour its lens lacks; 0: off
+    "clipped": True,  # clipped samples bound their colour's fit from below (lfcl.depth.cost, "Clipped samples")
     "backend": "device",  # "device" (lfcl/kernels/depth.cl) or "numpy" (the float64 twin)
 }
 
@@ -145,8 +146,9 @@ def _options(options: dict) -> dict:
     if isinstance(out["radius"], bool) or not isinstance(out["radius"], (int, np.integer)) or out["radius"] < 0:
         raise ValueError(f"disparity option radius must be an integer >= 0, got {out['radius']!r}")
     out["radius"] = int(out["radius"])
-    if not isinstance(out["occlusion"], bool):
-        raise ValueError(f"disparity option occlusion must be true or false, got {out['occlusion']!r}")
+    for name in ("occlusion", "clipped"):
+        if not isinstance(out[name], bool):
+            raise ValueError(f"disparity option {name} must be true or false, got {out[name]!r}")
     if out["model"] not in MODELS:
         raise ValueError(f"disparity option model must be one of {', '.join(MODELS)}, got {out['model']!r}")
     if out["backend"] not in ("device", "numpy"):
@@ -393,7 +395,7 @@ def estimate_disparity(mosaic, pattern, pitch, *, origin=(0, 0), noise=None, dev
             start = time.perf_counter()
             volume = cost_volume_np(mosaic, pattern, (U, V), ds, origin=origin, noise=(gain, floor),
                                     saturation=opts["saturation"], model=opts["model"], views=views,
-                                    colour=opts["colour"])
+                                    colour=opts["colour"], clipped=opts["clipped"])
             if index == 0:
                 seen = volume[1].max(axis=0) > 0  # lenses that gathered any sample (the full aperture)
             best = take_aperture_np(best, aggregate_window_np(volume[0], offsets, wwin),
@@ -406,7 +408,7 @@ def estimate_disparity(mosaic, pattern, pitch, *, origin=(0, 0), noise=None, dev
         start = time.perf_counter()
         runtime = get_runtime(device)
         op = CostVolume(runtime, mosaic.shape, pattern, (U, V), ds, origin=origin, model=opts["model"],
-                        halves=opts["occlusion"], colour=opts["colour"])
+                        halves=opts["occlusion"], colour=opts["colour"], clipped=opts["clipped"])
         window = WindowAggregate(runtime, 2 * ds.size, (S, T), opts["radius"])
         data = runtime.to_device(mosaic)
         weights = window.weights(guide, _guide_scale(guide, opts["guide_sigma"], gain, floor))

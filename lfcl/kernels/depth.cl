@@ -85,7 +85,7 @@ inline float colour_penalty(const float m[3], const float k[3], const float r[3]
 // excess and weight of one aperture's per-colour sums (values less ref); eta > 0 adds the colour penalty against
 // the lens's colour `lens` (r_R, r_G, r_B, kind; absolute values).
 inline float2 aperture_cost(float acc[3][NSUM], const float ref, const float gain, const float floor_var,
-                            const float eta, const float4 lens)
+                            const float eta, const float4 lens, const float clipped[3][3], const float saturation)
 {
     float excess = 0.0f, weight = 0.0f;
     float m[3] = {0.0f, 0.0f, 0.0f}, k[3] = {0.0f, 0.0f, 0.0f};
@@ -97,7 +97,7 @@ inline float2 aperture_cost(float acc[3][NSUM], const float ref, const float gai
         const float nv = fmax(gain * fmax(mean, 0.0f) + floor_var, 1e-12f);
         m[c] = acc[c][6] / Wc;
         k[c] = Wc / nv;
-        float rss, trace;
+        float rss, trace, fit = mean;  // fit: the colour's fitted value at its clipped samples' mean place
 #if PLANE_MODEL
         const float r = RIDGE * Wc;
         // A = [[W, Sy, Sx], [Sy, Syy + r, Syx], [Sx, Syx, Sxx + r]] (symmetric): inverse by cofactors.
@@ -119,12 +119,22 @@ inline float2 aperture_cost(float acc[3][NSUM], const float ref, const float gai
         const float q00 = acc[c][10], q01 = acc[c][11], q02 = acc[c][12];
         const float q11 = acc[c][13], q12 = acc[c][15], q22 = acc[c][14];
         trace = i00 * q00 + i11 * q11 + i22 * q22 + 2.0f * (i01 * q01 + i02 * q02 + i12 * q12);
+        if (clipped[c][0] > 0.0f)
+            fit = ref + (i00 * b0 + i01 * b1 + i02 * b2)
+                  + (i01 * b0 + i11 * b1 + i12 * b2) * clipped[c][1] / clipped[c][0]
+                  + (i02 * b0 + i12 * b1 + i22 * b2) * clipped[c][2] / clipped[c][0];
 #else
         rss = acc[c][9] - acc[c][6] * acc[c][6] / Wc;
         trace = acc[c][10] / Wc;
 #endif
         excess += rss / nv - (Wc - trace);
         weight += Wc;
+        // The clipped samples of this colour bound its radiance from below (lfcl/depth/cost.py, "Clipped samples").
+        if (clipped[c][0] > 0.0f) {
+            const float nv_clip = fmax(gain * fmax(saturation, 0.0f) + floor_var, 1e-12f);
+            const float gap = fmax(saturation - fit - sqrt(nv_clip), 0.0f);
+            excess += clipped[c][0] * gap * gap / nv_clip;
+        }
     }
     if (eta > 0.0f) {
         const float r[3] = {lens.x - ref, lens.y - ref, lens.z - ref};
@@ -174,7 +184,7 @@ __kernel void depth_cost(__global const float *mosaic, __constant float *dispari
                          __global float *cost, const int count, const int S, const int T, const int ND,
                          const int pattern, const float gain, const float floor_var, const float saturation,
                          const int u_lo, const int u_hi, const int v_lo, const int v_hi,
-                         __global const float *colour, const float eta)
+                         __global const float *colour, const float eta, const int bound_clipped)
 {
     const int i = get_global_id(0);
     const int k = get_global_id(1);
@@ -189,16 +199,20 @@ __kernel void depth_cost(__global const float *mosaic, __constant float *dispari
     const float ref = mosaic[(s * PITCH_U + PITCH_U / 2) * W + t * PITCH_V + PITCH_V / 2];
 
     float total[NSUB][3][NSUM];
+    float clipped[NSUB][3][3];  // per colour, the clipped samples gathered: sum w, sum w p_y, sum w p_x
     for (int a = 0; a < NSUB; ++a)
-        for (int c = 0; c < 3; ++c)
+        for (int c = 0; c < 3; ++c) {
+            clipped[a][c][0] = clipped[a][c][1] = clipped[a][c][2] = 0.0f;
             for (int j = 0; j < NSUM; ++j)
                 total[a][c][j] = 0.0f;
+        }
 
     for (int ry = 0; ry < NREG; ++ry) {
         const int2 us = region_views(ry, PITCH_U, u_lo, u_hi);
         for (int rx = 0; rx < NREG; ++rx) {
             const int2 vs = region_views(rx, PITCH_V, v_lo, v_hi);
             float acc[3][NSUM];
+            float clip[3][3] = {{0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}};
             for (int c = 0; c < 3; ++c)
                 for (int j = 0; j < NSUM; ++j)
                     acc[c][j] = 0.0f;
@@ -225,12 +239,17 @@ __kernel void depth_cost(__global const float *mosaic, __constant float *dispari
                             const float px = (float)b - fx;
                             const int col = tp * PITCH_V + v;
                             const float raw = mosaic[row * W + col];
+                            const float w = wy * wx;
+                            const int c = bayer_colour(row, col, pattern);
+                            if (bound_clipped && raw >= saturation) {
+                                clip[c][0] += w;
+                                clip[c][1] += w * py;
+                                clip[c][2] += w * px;
+                            }
                             if (!(raw < saturation))
                                 continue;
                             const float value = raw - ref;
-                            const float w = wy * wx;
                             const float w2 = w * w;
-                            const int c = bayer_colour(row, col, pattern);
                             acc[c][0] += w;
                             acc[c][1] += w * py;
                             acc[c][2] += w * px;
@@ -256,9 +275,12 @@ __kernel void depth_cost(__global const float *mosaic, __constant float *dispari
                 const bool holds = a == 0 || (a == 1 && ry <= 1) || (a == 2 && ry >= 1) || (a == 3 && rx <= 1)
                                    || (a == 4 && rx >= 1);
                 if (holds)
-                    for (int c = 0; c < 3; ++c)
+                    for (int c = 0; c < 3; ++c) {
+                        for (int j = 0; j < 3; ++j)
+                            clipped[a][c][j] += clip[c][j];
                         for (int j = 0; j < NSUM; ++j)
                             total[a][c][j] += acc[c][j];
+                    }
             }
         }
     }
@@ -268,7 +290,7 @@ __kernel void depth_cost(__global const float *mosaic, __constant float *dispari
     const float4 lens = eta > 0.0f ? (float4)(colour[at], colour[plane + at], colour[2 * plane + at],
                                               colour[3 * plane + at]) : (float4)(0.0f);
     for (int a = 0; a < NSUB; ++a) {
-        const float2 ew = aperture_cost(total[a], ref, gain, floor_var, eta, lens);
+        const float2 ew = aperture_cost(total[a], ref, gain, floor_var, eta, lens, clipped[a], saturation);
         cost[((size_t)a * 2 * ND + k) * plane + s * T + t] = ew.x;
         cost[((size_t)a * 2 * ND + ND + k) * plane + s * T + t] = ew.y;
     }
@@ -386,7 +408,8 @@ __kernel void depth_cost_interior(__global const float *views, __constant float 
             const size_t at = lens + lane;
             const float4 own = eta > 0.0f ? (float4)(colour[at], colour[plane + at], colour[2 * plane + at],
                                                      colour[3 * plane + at]) : (float4)(0.0f);
-            const float2 ew = aperture_cost(total, refs[lane], gain, floor_var, eta, own);
+            const float none[3][3] = {{0.0f}};  // no clipped sample reaches a lens of this box
+            const float2 ew = aperture_cost(total, refs[lane], gain, floor_var, eta, own, none, 1.0f);
             cost[((size_t)a * 2 * ND + k) * plane + lens + lane] = ew.x;
             cost[((size_t)a * 2 * ND + ND + k) * plane + lens + lane] = ew.y;
         }

@@ -106,8 +106,8 @@ def tiles(S: int, T: int, tile: int = TILE, count: int = TILES) -> list[tuple[in
 def tile_pair_variances(mosaic, pattern, pitch, origin, first_guess, device=None):
     """(levels, variances, pairs) over the tiles of :func:`tiles`: each tile's disparity is estimated with
     the ``first_guess`` noise model (its choice of ``d`` barely depends on the model's scale), without the colour
-    penalty (lfcl.depth.cost): with it the training captures' worst estimate went from 2.73x to 3.37x the truth
-    (finetexture seed 2 at 50 lux; docs/noise.md)."""
+    penalty and the clipped samples' bound (lfcl.depth.cost), as fitted: with either, the training captures' worst
+    estimate went from 2.73x the truth to 3.37x and 3.38x (finetexture seed 2 at 50 lux; docs/noise.md)."""
     from ..depth import estimate_disparity
     from ..layout import channel_map
 
@@ -118,7 +118,7 @@ def tile_pair_variances(mosaic, pattern, pitch, origin, first_guess, device=None
         block = np.ascontiguousarray(mosaic[s0 * U:s1 * U, t0 * V:t1 * V])
         phase = (origin[0] + s0 * U, origin[1] + t0 * V)
         depth = estimate_disparity(block, pattern, (U, V), origin=phase, noise=first_guess, device=device,
-                                   occlusion=False, colour=0.0)
+                                   occlusion=False, colour=0.0, clipped=False)
         found = pair_variances(block, channel_map(block.shape, pattern, phase), (U, V), depth.disparity, TOLERANCE)
         for acc, part in zip(out, found):
             acc.append(part)
