@@ -240,6 +240,10 @@ def test_colour_penalty_counts_only_colour_the_lens_lacks(rng):
     np.testing.assert_allclose(colour_penalty_np(magenta, k, grey), [want])
     assert want > 1e3
     np.testing.assert_allclose(colour_penalty_np(np.full((3, 1), 0.7), k, grey), [-2.0], atol=1e-12)
+    # Equal red and blue gains: a grey lens reads (0.45, 1, 0.45) in the raw, and the checker's candidate at d = 2
+    # (0.45, 0, 0.45) is a negative multiple of it plus an offset; only a non-negative multiple counts as its colour.
+    raw_grey = np.array([0.45, 1.0, 0.45, 1.0])[:, None]
+    assert colour_penalty_np(np.array([0.45, 0.0, 0.45])[:, None], k, raw_grey)[0] > 1e3
     assert colour_penalty_np(magenta, np.array([[2.0], [0.0], [0.0]]), grey)[0] == 0.0
     assert abs(colour_penalty_np(magenta, np.array([[2e4], [4e4], [0.0]]), red)[0]) < 1e-9  # 2 colours, 2 dof
     assert colour_penalty_np(magenta, k, np.array([0.4, 0.4, 0.4, 2.0])[:, None])[0] == 0.0

@@ -39,12 +39,14 @@ scene does not have: an in-focus grey checker of 2-lens squares is fitted exactl
 ``d = +-2`` (red and blue white, green black: every line's colours fall on one square each), and the prior along the
 lines at ``+-2`` then paints that colour. So the candidate's weighted per-colour means ``m_c`` (weights
 ``k_c = W_c / nv_c``) are compared with the lens's own colour ``r_c`` (the mean of each colour's samples in the
-lens's micro-image, :func:`lens_colour_np`): what no grey offset and no multiple of the lens's colour explains,
+lens's micro-image, :func:`lens_colour_np`): what no grey offset and no non-negative multiple of the lens's colour explains,
 
-    penalty = min_{alpha, beta} sum_c k_c (m_c - alpha r_c - beta)^2 - (n - 1 - [alpha fitted]),
+    penalty = min_{alpha >= 0, beta} sum_c k_c (m_c - alpha r_c - beta)^2 - (n - 1 - [alpha fitted]),
 
 ``n`` the kept colours (at most 1 dof is left of 3; none with 2 or fewer, so a one-colour candidate has none), less
-its noise-only expectation; ``alpha`` is fitted only where the lens's colour differs from grey by more than
+its noise-only expectation; ``alpha >= 0``: a negative multiple would explain a colour opposite to the lens's (with
+equal red and blue gains, a grey checker's raw at d = +-2 is one: (0.45, 0, 0.45) against the lens's (0.45, 1,
+0.45)); ``alpha`` is fitted only where the lens's colour differs from grey by more than
 ``COLOURED_CHI2`` (its chi-square in noise units, 2 dof: about 1 % of grey lenses by chance), and a lens with a
 colour it has no unsaturated sample of has no penalty. ``excess += colour * penalty``. At ``d = 0`` the candidate
 gathers the lens's own samples: no penalty; the true ``d`` of a uniformly coloured patch: none either.
@@ -139,7 +141,7 @@ def colour_penalty_np(means, k, lens) -> np.ndarray:
     dr = np.where(kept, r - (k * r).sum(axis=0) / K, 0.0)
     rr = (k * dr * dr).sum(axis=0)
     fit = (lens[3] > 0.5) & (lens[3] < 1.5) & (rr > 0)
-    alpha = np.where(fit, (k * dm * dr).sum(axis=0) / np.where(rr > 0, rr, 1.0), 0.0)
+    alpha = np.where(fit, np.maximum((k * dm * dr).sum(axis=0) / np.where(rr > 0, rr, 1.0), 0.0), 0.0)
     e = dm - alpha * dr
     penalty = (k * e * e).sum(axis=0) - (n - 1 - fit)
     return np.where((n >= 2) & (lens[3] < 1.5), penalty, 0.0)

@@ -72,7 +72,7 @@ inline float colour_penalty(const float m[3], const float k[3], const float r[3]
             rr += k[c] * (r[c] - rbar) * (r[c] - rbar);
         }
     const int fit = kind > 0.5f && rr > 0.0f;
-    const float alpha = fit ? mr / rr : 0.0f;
+    const float alpha = fit ? fmax(mr / rr, 0.0f) : 0.0f;  // a multiple of the lens's colour, not of its inverse
     float penalty = 0.0f;
     for (int c = 0; c < 3; ++c)
         if (k[c] > 0.0f) {
