@@ -31,15 +31,16 @@ candidate explained a lens whose one colour clips: only its dark colours were fi
 ``W_clip,c * max(saturation - f_c - sd, 0)^2 / nv(saturation)``, ``W_clip,c`` the weight of its clipped samples
 gathered, ``f_c`` the colour's fitted plane at their weighted mean place (its mean for ``model="mean"``; texture that
 rises into the clip is no conflict) and ``sd = sqrt(nv(saturation))`` one sample's noise at the clip (a fit near the
-clip, whose unclipped samples are biased low, pays nothing). A colour with only clipped samples pays nothing. ``clipped=False`` leaves
-the bound out.
+clip, whose unclipped samples are biased low, pays nothing). A colour with only clipped samples pays nothing.
+``clipped=False`` leaves the bound out.
 
 **The colour penalty** (``colour`` = eta > 0). The per-colour fits let a candidate explain the samples as a colour the
 scene does not have: an in-focus grey checker of 2-lens squares is fitted exactly at ``d = 0`` (grey) and at
 ``d = +-2`` (red and blue white, green black: every line's colours fall on one square each), and the prior along the
 lines at ``+-2`` then paints that colour. So the candidate's weighted per-colour means ``m_c`` (weights
 ``k_c = W_c / nv_c``) are compared with the lens's own colour ``r_c`` (the mean of each colour's samples in the
-lens's micro-image, :func:`lens_colour_np`): what no grey offset and no non-negative multiple of the lens's colour explains,
+lens's micro-image, :func:`lens_colour_np`): what no grey offset and no non-negative multiple of the lens's colour
+explains,
 
     penalty = min_{alpha >= 0, beta} sum_c k_c (m_c - alpha r_c - beta)^2 - (n - 1 - [alpha fitted]),
 

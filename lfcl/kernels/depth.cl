@@ -10,7 +10,9 @@
 // Values are taken relative to the lens's own centre pixel (conditioning in float32 only).
 // With eta > 0 the excess also holds eta times the colour penalty (lfcl/depth/cost.py, "The colour penalty"):
 // how far the candidate's per-colour means lie from the span of grey and the lens's own colour
-// (colour[4][S][T] from depth_lens_colour), in noise units, less its noise-only expectation.
+// (colour[4][S][T] from depth_lens_colour), in noise units, less its noise-only expectation. With bound_clipped
+// (depth_cost; no lens of depth_cost_interior reaches a clipped sample) a colour's clipped samples bound its fit from
+// below (lfcl/depth/cost.py, "Clipped samples").
 //
 // Build-time constants: PITCH_U, PITCH_V, PLANE_MODEL (0/1), RIDGE_PPM and MIN_WEIGHT_PPM (the
 // ridge factor and the smallest colour weight kept, in millionths), HALVES (0/1).
