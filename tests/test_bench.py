@@ -201,6 +201,25 @@ def test_bench_matrix_rows_and_the_worst_cell_first(tmp_path):
     assert bad.exit_code != 0 and "noise sources must be among profile, raw" in bad.output
 
 
+def test_bench_matrix_levels_sample_both_kinds_of_auto_band_below_the_brightest():
+    """The default levels reach auto's cheaper band (a method outside COSTLY_METHODS) at more than its brightest level:
+    the periodic scene is below Malvar inside that band, not at 50 lux (docs/auto.md)."""
+    from lfcl.bench.matrix import HELD_OUT_SEED, LUX
+    from lfcl.demosaic import auto
+    from lfcl.evaluation.evaluate import simulated_capture
+    from lfcl.noise.model import from_noise_profile
+
+    result = _invoke(["bench", "matrix", "--help"])
+    assert result.exit_code == 0 and "[default: " + ",".join(f"{v:g}" for v in LUX) + "]" in result.output
+    costly = []
+    for lux in LUX:
+        capture = simulated_capture(24, lux, seed=HELD_OUT_SEED, scene="charts")
+        sigma = from_noise_profile(capture.noise_profile, capture.mosaic).sigma
+        costly.append(auto.choose(sigma).method in auto.COSTLY_METHODS)
+    assert costly[0] and not costly[-1]
+    assert sum(not c for c in costly) >= 2, dict(zip(LUX, costly))
+
+
 def test_bench_matrix_finds_the_real_light_fields_it_is_given(tmp_path):
     from lfcl.bench.matrix import real_lightfields
 

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import click
 
+from ...bench.matrix import LUX as MATRIX_LUX
 from ...demosaic.names import DEFAULT_METHOD
 from . import device_option, user_errors
 
@@ -223,7 +224,8 @@ def stress_command(lenses, only, with_reference, as_json, device):
 @click.option("--shared", default="../shared", show_default=True, type=click.Path(path_type=Path),
               help="The workplace's shared folder: its real light fields (antinous, Lytro 2067) join the matrix "
                    "where present.")
-@click.option("--lux", "lux_text", default="0.5,1,2,4,12,50", show_default=True, metavar="LUX,...")
+@click.option("--lux", "lux_text", default=",".join(f"{v:g}" for v in MATRIX_LUX), show_default=True,
+              metavar="LUX,...")
 @click.option("--methods", default=",".join(dict.fromkeys((DEFAULT_METHOD, "auto", "admm-uvst"))), show_default=True,
               metavar="METHOD,...", help="Methods compared with Malvar (default: `lfcl process`'s default, auto "
                                          "and admm-uvst).")
