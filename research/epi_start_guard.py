@@ -1,4 +1,4 @@
-"""admm-epi's guarded start: fit ONE_COLOUR_WITHIN and measure the rules of lfcl/demosaic/guarded_start.py, on
+"""admm-epi's guarded start: fit ONE_COLOUR_WITHIN and ONE_COLOUR_MAJORITY and measure the rules of lfcl/demosaic/guarded_start.py, on
 training captures only; report the held-out periodic scene.
 
 The guarded start gives Malvar's start (with their neighbours) to the lenses where linear4d breaks and, with
@@ -9,16 +9,19 @@ at an end of the search range, not confident).
 
     python research/epi_start_guard.py within --lenses 48 --shared ../shared
     python research/epi_start_guard.py rules --lenses 48 --shared ../shared
+    python research/epi_start_guard.py majority --lenses 48 --lux 0.5,2,12,50,100 --shared ../shared
 
 ``within``: for every training capture (research/fit_auto.py's: charts, deadleaves and finetexture at seeds 1 and 2,
 the four training photographs at seed 1) and light level, admm-epi runs as `lfcl process` runs it (the noise from the
 DNG profile; the range-edge rule off) at each W (0: no one-colour rule), and the gains over Malvar (centre view, mean
 image) are tabulated against W = 0. The W with the best worst change wins (ties: the larger mean centre-view change,
 then the smaller W). ``rules``: the same captures with neither rule, the one-colour rule, and both (the shipped
-guard), each against neither.
+guard), each against neither. ``majority``: the shipped guard with one-colour lenses below CONFIDENT counted where
+at least M of their 3x3 neighbourhood are one-colour lenses, for each M (10: none), against none; the M with the best
+worst change wins, changes within 0.01 dB of it tie (then the larger mean centre-view change).
 
-Regenerates: lfcl.demosaic.guarded_start.ONE_COLOUR_WITHIN (by hand, from the printed table; docs/auto.md
-"Periodic content").
+Regenerates: lfcl.demosaic.guarded_start.ONE_COLOUR_WITHIN and ONE_COLOUR_MAJORITY (by hand, from the printed
+tables; docs/auto.md "Periodic content").
 """
 
 from __future__ import annotations
@@ -34,10 +37,15 @@ from lfcl.evaluation.evaluate import run_method, simulated_capture
 
 WITHIN = (0.0, 0.05, 0.1, 0.15, 0.2, 0.3)
 NO_RANGE_EDGE = 10  # a majority no 3x3 neighbourhood reaches: the range-edge rule off
+NO_MAJORITY = 10  # the same for the one-colour lenses: confident ones only
+MAJORITY = (NO_MAJORITY, 9, 7, 5)
+TIE_DB = 0.01
 
 
-def gains(capture, malvar: dict, within: float, majority: int) -> tuple[float, float]:
+def gains(capture, malvar: dict, within: float, majority: int, one_colour_majority: int = NO_MAJORITY
+          ) -> tuple[float, float]:
     guarded_start.ONE_COLOUR_WITHIN, guarded_start.RANGE_EDGE_MAJORITY = within, majority
+    guarded_start.ONE_COLOUR_MAJORITY = one_colour_majority
     result = run_method(capture, "admm-epi")
     return result["psnr_center"] - malvar["psnr_center"], result["psnr_mean"] - malvar["psnr_mean"]
 
@@ -65,7 +73,7 @@ def summary(rows: dict, names, base) -> dict:
         worst = min(min(c) for c in changes)
         centre, mean = float(np.mean([c[0] for c in changes])), float(np.mean([c[1] for c in changes]))
         moved = sum(1 for c in changes if max(abs(c[0]), abs(c[1])) >= 0.005)
-        out[name] = (round(worst, 2), round(centre, 3))
+        out[name] = (worst, centre)
         print(f"| {name} | {worst:+.2f} | {centre:+.3f} | {mean:+.3f} | {moved} of {len(changes)} |")
     return out
 
@@ -73,25 +81,34 @@ def summary(rows: dict, names, base) -> dict:
 def main(argv=None):
     global ARGS
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("part", choices=("within", "rules"))
+    parser.add_argument("part", choices=("within", "rules", "majority"))
     parser.add_argument("--lenses", type=int, default=48)
     parser.add_argument("--lux", default="0.5,2,12,50")
     parser.add_argument("--shared", type=Path, default=Path("../shared"))
     ARGS = parser.parse_args(argv)
-    shipped = guarded_start.ONE_COLOUR_WITHIN, guarded_start.RANGE_EDGE_MAJORITY
+    shipped = guarded_start.ONE_COLOUR_WITHIN, guarded_start.RANGE_EDGE_MAJORITY, guarded_start.ONE_COLOUR_MAJORITY
     lux_levels = [float(v) for v in ARGS.lux.split(",")]
     if ARGS.part == "within":
         settings = {f"W={w:g}": (w, NO_RANGE_EDGE) for w in WITHIN}
+    elif ARGS.part == "majority":
+        settings = {f"M={m}": (*shipped[:2], m) for m in MAJORITY}
     else:
-        settings = {"neither": (0.0, NO_RANGE_EDGE), "one-colour": (shipped[0], NO_RANGE_EDGE), "both": shipped}
+        settings = {"neither": (0.0, NO_RANGE_EDGE), "one-colour": (shipped[0], NO_RANGE_EDGE, shipped[2]),
+                    "both": shipped}
     rows = table(training_captures(ARGS.shared), settings, lux_levels)
     scores = summary(rows, settings, next(iter(settings)))
     if ARGS.part == "within":
-        best = max(WITHIN, key=lambda w: (*scores[f"W={w:g}"], -w))  # ties: the larger mean change, the smaller W
+        rounded = {w: (round(scores[f"W={w:g}"][0], 2), round(scores[f"W={w:g}"][1], 3)) for w in WITHIN}
+        best = max(WITHIN, key=lambda w: (*rounded[w], -w))  # ties: the larger mean change, the smaller W
         print(f"\nchosen: W = {best:g} (worst change {scores[f'W={best:g}'][0]:+.2f} dB)")
+    if ARGS.part == "majority":
+        top = max(worst for worst, _ in scores.values())
+        tied = [m for m in MAJORITY if scores[f"M={m}"][0] >= top - TIE_DB]
+        best = max(tied, key=lambda m: scores[f"M={m}"][1])
+        print(f"\nchosen: M = {best} (worst change {scores[f'M={best}'][0]:+.3f} dB)")
     print("\nheld out, periodic seed 7 (gain over Malvar, centre / mean):")
     table([("periodic 7", {"scene": "periodic", "seed": 7})], settings, lux_levels)
-    guarded_start.ONE_COLOUR_WITHIN, guarded_start.RANGE_EDGE_MAJORITY = shipped
+    guarded_start.ONE_COLOUR_WITHIN, guarded_start.RANGE_EDGE_MAJORITY, guarded_start.ONE_COLOUR_MAJORITY = shipped
 
 
 if __name__ == "__main__":

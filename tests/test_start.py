@@ -302,6 +302,52 @@ def test_range_edge_lenses_are_a_majority_at_the_search_ranges_end_and_not_confi
     assert not range_edge_lenses(SimpleNamespace(disparity=d, confidence=w, dmax=2.0, step=0.1), flat).any()
 
 
+def test_known_one_colour_lenses_are_confident_or_shared_by_most_of_their_neighbourhood():
+    """A one-colour lens counts where its disparity is confident or where at least ONE_COLOUR_MAJORITY of its 3x3
+    neighbourhood are one-colour lenses too (clipping lowers a right disparity's confidence); a lone unsure one is
+    the noise's and does not count."""
+    from types import SimpleNamespace
+
+    from lfcl.demosaic.guarded_start import CONFIDENT, ONE_COLOUR_MAJORITY, known_one_colour_lenses
+
+    d, w = np.full((9, 10), 0.4), np.full((9, 10), 0.9)
+    d[1:6, 1:6], w[1:6, 1:6] = 1.01, 0.3 * CONFIDENT  # a clipped grating's block: right, but unsure
+    d[7, 8], w[7, 8] = -0.99, 0.3 * CONFIDENT  # a lone unsure one
+    d[7, 1], w[7, 1] = 0.98, CONFIDENT  # a lone confident one
+    depth = SimpleNamespace(disparity=d, confidence=w)
+    got = known_one_colour_lenses(depth, (9, 9), within=0.05)
+    block = np.zeros((9, 10), bool)
+    block[1:6, 1:6] = True
+    counts = sum(np.pad(block, 1)[i:i + 9, j:j + 10].astype(int) for i in range(3) for j in range(3))
+    expected = block & (counts >= ONE_COLOUR_MAJORITY)  # 7 or more: the block's inside, not its edges
+    expected[7, 1] = True
+    np.testing.assert_array_equal(got, expected)
+    assert expected[2:5, 2:5].all() and not expected[1, 1] and not got[7, 8]
+    # with a majority of 1 every one-colour lens counts; with 10 (more than a neighbourhood holds) confident ones only
+    assert known_one_colour_lenses(depth, (9, 9), within=0.05, majority=1).sum() == 25 + 2
+    assert known_one_colour_lenses(depth, (9, 9), within=0.05, majority=10).sum() == 1
+    assert not known_one_colour_lenses(depth, (10, 10), within=0.05, majority=1).any()  # an even pitch: none
+
+
+def test_admm_epi_on_a_clipped_one_colour_grating_is_not_below_malvar():
+    """A grey sine grating of period 4 lenses at disparity 1 (one colour along the lines at pitch 9) at 100 lux,
+    where half its samples clip: the disparity is right but its confidence low, and before the one-colour lenses
+    counted by their neighbourhood too, admm-epi took linear4d's start there and fell 2.9 dB below Malvar's centre
+    view (docs/auto.md, "Periodic content")."""
+    from lfcl.evaluation.evaluate import run_method, simulation_capture
+    from lfcl.sim import simulate
+    from lfcl.sim.periodic import SineGrating
+    from lfcl.sim.planes import Plane
+
+    capture = simulation_capture(simulate(planes=[Plane("grating", 1.0, SineGrating(4.0, 0.7))], lenses=(24, 24),
+                                          lux=100, seed=3))
+    assert (capture.mosaic >= 0.999).mean() > 0.4  # it clips
+    malvar, got = run_method(capture, "malvar"), run_method(capture, "admm-epi")
+    assert got["psnr_center"] >= malvar["psnr_center"], (got["psnr_center"], malvar["psnr_center"])
+    assert got["psnr_mean"] >= malvar["psnr_mean"], (got["psnr_mean"], malvar["psnr_mean"])
+    assert got["parameters"]["start_guard"]["one_colour_lenses"] > 400
+
+
 def test_admm_epi_on_content_beyond_the_search_range_is_not_below_malvar():
     """A grey grating of period 10 lenses at disparity -3 (beyond the search range of +-2) filling a 24x24-lens
     frame: admm-epi as `lfcl process` runs it was 2.65 dB below Malvar's centre view at 12 lux before its range-edge

@@ -17,7 +17,8 @@ start (docs/auto.md, "Periodic content"):
 * in the lenses whose epipolar lines carry one colour (:func:`one_colour_lenses`): with an odd pitch and an
   odd integer disparity every sample along a line has the same CFA colour, so neither the data term nor the
   prior along the lines says anything about the line's two other colours, and admm-epi keeps whatever the
-  start put there. linear4d's guess breaks on lens-scale gratings; Malvar's is Malvar's own;
+  start put there. linear4d's guess breaks on lens-scale gratings; Malvar's is Malvar's own. The disparity must
+  be known there (:func:`known_one_colour_lenses`): confident, or shared by most of the neighbourhood;
 * in regions whose disparity is an end of the search range and not confident, and whose micro-images are not
   flat within the noise (:func:`range_edge_lenses`): content beyond the range, or a repeating pattern the cost
   cannot tell from a coloured one, so the lines followed are not the scene's. (A texture-less lens has no line
@@ -46,6 +47,14 @@ ONE_COLOUR_WITHIN = 0.05
 #: the noise gave 36 lenses of a training photograph (Kodak DC120 at 48x48 lenses) an odd disparity and the start's
 #: noise in them cost 0.36 dB of centre view.
 CONFIDENT = 0.5
+#: A one-colour lens whose confidence is below :data:`CONFIDENT` still counts where at least this many of its 3x3
+#: neighbourhood (itself included) are one-colour lenses too. Clipping lowers a right disparity's confidence (a clipped
+#: sample only bounds the cost, docs/depth.md): on the periodic scene's grating at 100 lux (54 % of its samples clip)
+#: the disparity was 1.01 but its median confidence 0.36, 96 lenses counted instead of ~450, and admm-epi fell to
+#: 0.72 dB below Malvar's centre view (+0.28 with this rule). The noise's odd disparities are lone ones.
+#: research/epi_start_guard.py majority on the training captures at 0.5-100 lux: 5 cost a training photograph
+#: 0.08 dB at 0.5 lux, 7 and 9 no cell more than 0.005 dB, and 7 gained more (docs/auto.md, "Periodic content").
+ONE_COLOUR_MAJORITY = 7
 #: A range-edge lens counts where at least this many of its 3x3 neighbourhood (itself included) are range-edge
 #: lenses: a majority. Lone ones are the noise's (at 0.5 lux 13-14 lenses of two training photographs, which cost
 #: them up to 0.26 dB of centre view; docs/auto.md, "Periodic content").
@@ -90,6 +99,15 @@ def one_colour_lenses(disparity: np.ndarray, pitch, within: float = ONE_COLOUR_W
     return odd & (np.abs(d - k) < within)
 
 
+def known_one_colour_lenses(depth, pitch, within: float = ONE_COLOUR_WITHIN, majority: int | None = None) -> np.ndarray:
+    """The lenses [S, T] of :func:`one_colour_lenses` whose disparity is known: confident (at least :data:`CONFIDENT`)
+    or in a neighbourhood where ``majority`` (None: :data:`ONE_COLOUR_MAJORITY`) of the 3x3 lenses are one-colour
+    lenses too. ``depth``: an ``lfcl.depth.DisparityMap`` (its ``disparity`` and ``confidence``)."""
+    one_colour = one_colour_lenses(depth.disparity, pitch, within)
+    majority = ONE_COLOUR_MAJORITY if majority is None else int(majority)
+    return one_colour & ((np.asarray(depth.confidence) >= CONFIDENT) | (neighbourhood_count(one_colour) >= majority))
+
+
 def range_edge_lenses(depth, flat: np.ndarray | None = None, majority: int | None = None) -> np.ndarray:
     """The lenses [S, T] whose disparity is an end of the search range (the best candidate is the last one), not
     confident (below :data:`CONFIDENT`) and not ``flat`` ([S, T] bool: flat within the noise,
@@ -109,8 +127,8 @@ def guarded_start(runtime, linear4d_start, malvar_start, mosaic, pitch, noise: N
                   flat: np.ndarray | None = None):
     """The guarded start, written into the device ``linear4d_start`` [3, H, W] (which is returned),
     and what it did (``factor``, the median D, ``lenses_from_malvar`` of ``lenses``). With ``depth``, admm-epi's
-    ``lfcl.depth.DisparityMap``, the lenses of one-colour lines (:func:`one_colour_lenses`, ``one_colour_within``;
-    None: :data:`ONE_COLOUR_WITHIN`) whose confidence is at least :data:`CONFIDENT` and their neighbours
+    ``lfcl.depth.DisparityMap``, the lenses of one-colour lines whose disparity is known
+    (:func:`known_one_colour_lenses`, ``one_colour_within``; None: :data:`ONE_COLOUR_WITHIN`) and their neighbours
     take Malvar's too, and so do the lenses of :func:`range_edge_lenses` (with ``flat``, the lenses flat within the
     noise) and theirs (``one_colour_lenses``, ``one_colour_within``, ``confident``, ``range_edge_lenses``)."""
     guard = LensGuard(runtime, mosaic.shape, pitch)
@@ -119,11 +137,10 @@ def guarded_start(runtime, linear4d_start, malvar_start, mosaic, pitch, noise: N
     report = {"factor": factor, "median_disagreement": float(np.median(d))}
     if depth is not None:
         one_colour_within = ONE_COLOUR_WITHIN if one_colour_within is None else float(one_colour_within)
-        one_colour = one_colour_lenses(depth.disparity, pitch, one_colour_within)
-        one_colour &= depth.confidence >= CONFIDENT
+        one_colour = known_one_colour_lenses(depth, pitch, one_colour_within)
         range_edge = range_edge_lenses(depth, flat)
         outliers |= one_colour | range_edge
-        report.update(one_colour_within=one_colour_within, confident=CONFIDENT,
+        report.update(one_colour_within=one_colour_within, confident=CONFIDENT, one_colour_majority=ONE_COLOUR_MAJORITY,
                       one_colour_lenses=int(one_colour.sum()), range_edge_lenses=int(range_edge.sum()))
     chosen = with_neighbours(outliers)
     if chosen.any():
