@@ -2,8 +2,9 @@
 
 A scene is a list of :class:`lfcl.sim.planes.Plane`, front to back, built for a
 lens count (and seed). ``charts`` (:mod:`lfcl.sim.charts`), ``deadleaves``
-(:mod:`lfcl.sim.deadleaves`), ``finetexture`` (:mod:`lfcl.sim.finetexture`) and ``periodic``
-(:mod:`lfcl.sim.periodic`, repeating content: a stress scene no default was fitted on) need no files. :func:`render_disparity` / :func:`planes_disparity`: the true
+(:mod:`lfcl.sim.deadleaves`), ``finetexture`` (:mod:`lfcl.sim.finetexture`), ``periodic``
+(:mod:`lfcl.sim.periodic`, repeating content: a stress scene no default was fitted on) and ``gratings``
+(:mod:`lfcl.sim.gratings`, lens-scale gratings off the focal plane, drawn per seed) need no files. :func:`render_disparity` / :func:`planes_disparity`: the true
 centre-view disparity map of a scene. With ``texture=IMAGE`` the scene
 keeps its planes (depths, disparities, supports, occlusion) but every plane
 shows the image (:class:`lfcl.sim.texture.ImageTexture`), fitted to the plane's
@@ -21,11 +22,12 @@ import numpy as np
 from .charts import charts_planes
 from .deadleaves import deadleaves_planes
 from .finetexture import finetexture_planes
+from .gratings import gratings_planes
 from .periodic import periodic_planes
 from .planes import Plane, render_planes
 from .texture import ImageTexture, read_linear
 
-SCENES = ("charts", "deadleaves", "finetexture", "periodic")
+SCENES = ("charts", "deadleaves", "finetexture", "periodic", "gratings")
 
 
 def check_scene(name: str) -> str:
@@ -44,6 +46,8 @@ def scene_planes(name: str, lenses, seed: int = 0, pitch=(9, 9), texture=None) -
         planes = finetexture_planes((S, T), seed, pitch)
     elif name == "periodic":
         planes = periodic_planes((S, T), seed)
+    elif name == "gratings":
+        planes = gratings_planes((S, T), seed)
     else:
         planes = deadleaves_planes((S, T), seed, pitch)
     if texture is not None:

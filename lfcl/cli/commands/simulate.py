@@ -13,8 +13,9 @@ from . import user_errors
 @click.command("simulate")
 @click.option("--scene", default="charts", show_default=True, metavar="NAME",
               help="Built-in scene: charts (three resolution charts at different depths), deadleaves, "
-                   "finetexture (lens-scale grain, thin wedges and fine text off the focal plane) or periodic "
-                   "(gratings and checkerboards, one beyond the disparity search range: a stress scene).")
+                   "finetexture (lens-scale grain, thin wedges and fine text off the focal plane), periodic "
+                   "(gratings and checkerboards, one beyond the disparity search range: a stress scene) or gratings "
+                   "(four sine gratings off the focal plane, their periods, disparities and colours drawn from --seed).")
 @click.option("--texture", type=click.Path(path_type=Path, readable=False), default=None, metavar="IMAGE",
               help="Image mapped onto the scene's planes instead of their textures (8/16-bit: sRGB, decoded to linear; "
                    "a camera raw: developed linear by LibRaw).")
