@@ -1,10 +1,14 @@
 """Fit the safety net's threshold NET_K (lfcl/demosaic/safety_net.py) on training captures only.
 
-For every training capture (charts, deadleaves and finetexture at seeds 1 and 2; charts planes
-carrying the four training photographs of docs/auto.md, seed 1) and light level, each method runs
+For every training capture (research/fit_auto.py's with its stress families: charts, deadleaves, finetexture and
+gratings at seeds 1 and 2; charts planes carrying the four training photographs of docs/auto.md, seed 1) and light level, each method runs
 once without the net; the net's float64 twin (lfcl.ops.lensguard.guard_lens_means_np) is then applied
 at every candidate k, and the PSNR gains over Malvar (centre view, mean image) are tabulated. The k
-with the best worst case (the lower of the two gains, over every capture, level and method) wins.
+with the best worst case (the lower of the two gains, over every capture, level and method) wins; ties within
+TIE_DB go to the larger median mean-image gain, then the better worst case, then the larger median centre-view
+gain, each to 0.01 dB. A cell that no k (nor no net) keeps above Malvar - TIE_DB is the
+method's own loss, not the threshold's: it is listed and left out of the worst case (with the lens-scale gratings
+among the training captures, admm-uv's on one of them: -0.45..-0.57 dB of centre view at every k).
 
     python research/fit_safety_net.py --lenses 48 --shared ../shared
 
@@ -18,7 +22,7 @@ import math
 from pathlib import Path
 
 import numpy as np
-from fit_auto import training_captures  # the same training captures as auto's rule (research/fit_auto.py)
+from fit_auto import training_captures  # auto's training captures (research/fit_auto.py), with its stress families
 
 from lfcl.demosaic.driver import demosaic_grid
 from lfcl.evaluation.evaluate import simulated_capture
@@ -47,7 +51,7 @@ def main(argv=None):
     parser.add_argument("--shared", type=Path, default=Path("../shared"))
     args = parser.parse_args(argv)
     rows = []
-    for label, source in training_captures(args.shared):
+    for label, source in training_captures(args.shared, stress=True):
         for lux in (float(v) for v in args.lux.split(",")):
             capture = simulated_capture(args.lenses, lux, **source)
             noise = from_noise_profile(capture.noise_profile, capture.mosaic)
@@ -67,19 +71,35 @@ def main(argv=None):
     for method in args.methods.split(","):
         cells = [min(min(r[4], r[5]) for r in rows if r[2] == method and r[3] == k) for k in KS]
         print(f"| {method} | " + " | ".join(f"{c:+.2f}" for c in cells) + " |")
+    # A cell (capture, level, method) that no k keeps above Malvar - TIE_DB is the method's loss, not the net's:
+    # it is left out of the worst case (and listed), so that it cannot choose k by how it fails.
+    best_of_cell = {}
+    for r in rows:
+        key = r[:3]
+        best_of_cell[key] = max(best_of_cell.get(key, -math.inf), min(r[4], r[5]))
+    lost = sorted(key for key, value in best_of_cell.items() if value < -TIE_DB)
+    if lost:
+        print("\ncells below Malvar at every k (left out of the worst case):")
+        for key in lost:
+            print(f"  {key[0]} {key[1]:g} lux {key[2]}: at best {best_of_cell[key]:+.2f} dB")
     print("\n| k | worst dB | worst centre | worst mean | median centre | median mean |")
     print("|---|---|---|---|---|---|")
     summary = {}
     for k in KS:
-        sel = [r for r in rows if r[3] == k]
-        summary[k] = (min(min(r[4], r[5]) for r in sel), float(np.median([r[5] for r in sel])))
+        sel = [r for r in rows if r[3] == k and best_of_cell[r[:3]] >= -TIE_DB]
+        summary[k] = (min(min(r[4], r[5]) for r in sel), float(np.median([r[5] for r in sel])),
+                      float(np.median([r[4] for r in sel])))
         print(f"| {k:g} | {summary[k][0]:+.2f} | {min(r[4] for r in sel):+.2f} | {min(r[5] for r in sel):+.2f} "
               f"| {np.median([r[4] for r in sel]):+.2f} | {summary[k][1]:+.2f} |")
-    best_worst = max(w for w, _ in summary.values())
-    best = max((k for k in KS if summary[k][0] >= best_worst - TIE_DB), key=lambda k: summary[k][1])
+    best_worst = max(w for w, _, _ in summary.values())
+    # ties: the larger median mean-image gain, then the better worst case, then the larger median centre-view gain,
+    # each to 0.01 dB (what the tables show)
+    best = max((k for k in KS if summary[k][0] >= best_worst - TIE_DB),
+               key=lambda k: (round(summary[k][1], 2), round(summary[k][0], 2), round(summary[k][2], 2)))
     print(f"\nchosen: k = {best:g} (worst {summary[best][0]:+.2f} dB, median mean gain {summary[best][1]:+.2f} dB)")
     print("\nworst cells at that k:")
-    for r in sorted((r for r in rows if r[3] == best), key=lambda r: min(r[4], r[5]))[:8]:
+    for r in sorted((r for r in rows if r[3] == best and best_of_cell[r[:3]] >= -TIE_DB),
+                    key=lambda r: min(r[4], r[5]))[:8]:
         print(f"  {r[0]} {r[1]:g} lux {r[2]}: centre {r[4]:+.2f}, mean {r[5]:+.2f}")
 
 
