@@ -52,6 +52,12 @@ def summary(rows: list[dict], pairs) -> list[dict]:
     return table
 
 
+def chosen(table: list[dict]) -> dict | None:
+    """The eligible pair of the best worst centre-view gain (to 0.01 dB), then the best mean one; None: none is."""
+    eligible = [t for t in table if t["eligible"]]
+    return max(eligible, key=lambda t: (round(t["worst_centre"], 2), t["mean_centre"])) if eligible else None
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--lam-factors", default="0.1,0.12,0.15,0.2")
@@ -88,9 +94,8 @@ def main(argv=None):
     for t in table:
         print(f"| {t['pair']} | {t['worst_gain']:+.2f} | {t['worst_centre']:+.2f} | {t['mean_centre']:+.2f} | "
               f"{t['median_centre']:+.2f} | {t['worst_de']:+.2f} | {'yes' if t['eligible'] else 'no'} |")
-    eligible = [t for t in table if t["eligible"]]
-    if eligible:
-        best = max(eligible, key=lambda t: (round(t["worst_centre"], 2), t["mean_centre"]))
+    best = chosen(table)
+    if best is not None:
         print(f"\nchosen: {best['pair']} (worst centre gain {best['worst_centre']:+.2f} dB)")
     if args.output:
         args.output.write_text(json.dumps({"args": {k: str(v) for k, v in vars(args).items()}, "rows": rows,

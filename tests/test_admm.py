@@ -406,3 +406,23 @@ def test_exact_solve_keeps_a_flat_image_flat(runtime, lam_xc):
     solver = AdmmSolver(runtime, b.shape, "GRBG", (9, 9), "uv")
     result = solver.solve(runtime.to_device(b), runtime.to_device(x0), AdmmParams(lam=0.01, lam_xc=lam_xc, max_iter=10))
     assert np.abs(result.x.get() - 0.37).max() <= 1e-6
+
+
+def test_admm_uv_xc_defaults_are_what_their_fit_chose():
+    """The admm-uv-xc entry of ADMM_DEFAULTS is the pair research/fit_uv_xc.py chose on the rows it ran
+    (research/fit_uv_xc_48.json; docs/admm.md, "The cross-channel prior"): changing the defaults means refitting."""
+    import json
+    from pathlib import Path
+
+    from fit_uv_xc import TOLERANCE_DB, chosen, summary  # research/, on sys.path through conftest.py
+
+    from lfcl.demosaic.methods import ADMM_DEFAULTS
+
+    fit = json.loads((Path(__file__).resolve().parents[1] / "research" / "fit_uv_xc_48.json").read_text())
+    rows, pairs = fit["rows"], [t["pair"] for t in fit["table"]]
+    assert {row["capture"].split()[0] for row in rows} >= {"charts", "deadleaves", "finetexture", "gratings"}
+    best = chosen(summary(rows, pairs))
+    d = ADMM_DEFAULTS["admm-uv-xc"]
+    assert best["pair"] == f"{d.lam_per_sigma:g},{d.xc_per_sigma:g}"
+    # never below Malvar (to the net's precision) on any training capture, the gratings included
+    assert min(min(row["changes"][best["pair"]][:2]) for row in rows) >= -TOLERANCE_DB
