@@ -130,7 +130,8 @@ def guarded_start(runtime, linear4d_start, malvar_start, mosaic, pitch, noise: N
     ``lfcl.depth.DisparityMap``, the lenses of one-colour lines whose disparity is known
     (:func:`known_one_colour_lenses`, ``one_colour_within``; None: :data:`ONE_COLOUR_WITHIN`) and their neighbours
     take Malvar's too, and so do the lenses of :func:`range_edge_lenses` (with ``flat``, the lenses flat within the
-    noise) and theirs (``one_colour_lenses``, ``one_colour_within``, ``confident``, ``range_edge_lenses``)."""
+    noise) and theirs (``one_colour_lenses``, ``one_colour_within``, ``confident``, ``one_colour_majority``,
+    ``range_edge_lenses``)."""
     guard = LensGuard(runtime, mosaic.shape, pitch)
     d = guard.disagreement(linear4d_start, malvar_start, mosaic, noise.gain, noise.floor)
     outliers = disagreement_outliers(d, factor)
