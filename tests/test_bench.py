@@ -203,7 +203,7 @@ def test_bench_matrix_rows_and_the_worst_cell_first(tmp_path):
 
 def test_bench_matrix_levels_sample_both_kinds_of_auto_band_below_the_brightest():
     """The default levels reach auto's cheaper band (a method outside COSTLY_METHODS) at more than its brightest level:
-    the periodic scene is below Malvar inside that band, not at 50 lux (docs/auto.md)."""
+    the periodic scene was below Malvar inside that band, not at 50 lux, before admm-uv-xc was refitted (docs/auto.md)."""
     from lfcl.bench.matrix import HELD_OUT_SEED, LUX
     from lfcl.demosaic import auto
     from lfcl.evaluation.evaluate import simulated_capture

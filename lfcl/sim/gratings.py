@@ -19,25 +19,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from .periodic import ColourGrating
 from .planes import Plane
 
 #: The gratings' periods (lenses): log-uniform between these.
 PERIODS = (2.5, 16.0)
 #: Their disparities (lenses per view step): uniform in +-this, inside lfcl.depth's default range of +-2.
 DISPARITY = 1.9
-
-
-class ColourGrating:
-    """``first + (second - first) (0.5 + 0.5 sin(2 pi (x cos a + y sin a) / period + phase))``, linear RGB."""
-
-    def __init__(self, period: float, phase: float, angle: float, first, second):
-        self.period, self.phase, self.cos, self.sin = float(period), float(phase), np.cos(angle), np.sin(angle)
-        self.first = np.asarray(first, np.float32)
-        self.second = np.asarray(second, np.float32)
-
-    def __call__(self, x, y):
-        wave = 0.5 + 0.5 * np.sin(2 * np.pi * (x * self.cos + y * self.sin) / self.period + self.phase)
-        return (self.first + (self.second - self.first) * wave[:, None]).astype(np.float32)
 
 
 def gratings_planes(lenses, seed: int = 0) -> list[Plane]:

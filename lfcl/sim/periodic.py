@@ -31,15 +31,24 @@ from .planes import Plane
 ANGLE = 0.35
 
 
-class SineGrating:
+class ColourGrating:
+    """``first + (second - first) (0.5 + 0.5 sin(2 pi (x cos a + y sin a) / period + phase))``, linear RGB."""
+
+    def __init__(self, period: float, phase: float, angle: float, first, second):
+        self.period, self.phase, self.cos, self.sin = float(period), float(phase), np.cos(angle), np.sin(angle)
+        self.first = np.asarray(first, np.float32)
+        self.second = np.asarray(second, np.float32)
+
+    def __call__(self, x, y):
+        wave = 0.5 + 0.5 * np.sin(2 * np.pi * (x * self.cos + y * self.sin) / self.period + self.phase)
+        return (self.first + (self.second - self.first) * wave[:, None]).astype(np.float32)
+
+
+class SineGrating(ColourGrating):
     """Grey ``0.5 + 0.45 sin(2 pi (x cos a + y sin a) / period + phase)``."""
 
     def __init__(self, period: float, phase: float, angle: float = ANGLE):
-        self.period, self.phase, self.cos, self.sin = float(period), float(phase), np.cos(angle), np.sin(angle)
-
-    def __call__(self, x, y):
-        value = 0.5 + 0.45 * np.sin(2 * np.pi * (x * self.cos + y * self.sin) / self.period + self.phase)
-        return np.repeat(value[:, None], 3, axis=1).astype(np.float32)
+        super().__init__(period, phase, angle, (0.05,) * 3, (0.95,) * 3)
 
 
 class Checker:
