@@ -90,12 +90,13 @@ def test_kernels_memory_check_names_the_limit(runtime):
 
 def test_bench_pareto_json(tmp_path):
     out = tmp_path / "pareto"
-    # every lens solved by default, as the reference does
-    result = _invoke(["bench", "pareto", "--lenses", "8x8", "--budgets", "1,2", "--json", "-o", str(out)])
+    # every lens solved by default, as the reference does; without the safety net, which the reference has not
+    result = _invoke(["bench", "pareto", "--lenses", "8x8", "--budgets", "1,2", "--no-safety-net", "--json", "-o",
+                      str(out)])
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
     assert report["lenses"] == [8, 8] and report["budgets"] == [1, 2] and report["reference_budgets"] == [1, 2]
-    assert report["skip_flat"] is None
+    assert report["skip_flat"] is None and report["safety_net"] is False
     points = report["points"]
     methods = [(p["method"], p["iterations"]) for p in points]
     assert methods == [("malvar", 0), ("linear4d", 0), ("admm-uv", 1), ("admm-uv", 2), ("admm-st", 1), ("admm-st", 2),

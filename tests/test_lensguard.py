@@ -79,16 +79,51 @@ def test_lens_mean_guard_soft_thresholds_each_colour_mean_towards_malvar():
     assert replaced.tolist() == [[3.0, 2.0]]
 
 
+def test_lens_mean_guard_fills_a_flat_lens_whose_malvar_means_read_another_lens():
+    mosaic = np.full((9, 27), 0.25)  # 1x3 lenses; sd of a lens mean = sqrt(var / 20.25)
+    gain, floor, k, j = 0.0016, 0.0, 3.0, 1.0
+    sd = np.sqrt(gain * 0.25 / 20.25)
+    rng = np.random.default_rng(6)
+    m = rng.random((3, 9, 27))
+    x = m + 0.01 * rng.standard_normal((3, 9, 27))
+    means = lambda a: a.reshape(3, 9, 3, 9).mean(axis=(1, 3))  # noqa: E731
+    own = np.moveaxis(means(m), 0, -1)[None].copy()  # [1, 3, 3]: Malvar's means, moved below
+    own[0, 0, 1] += 1.5 * sd  # lens 0: flat, green 1.5 sd from Malvar's -> filled with its own means
+    own[0, 1] += 0.5 * sd  # lens 1: flat, every colour within j sd -> the soft threshold
+    own[0, 2, 0] += 5 * sd  # lens 2: far off, but not flat -> the soft threshold
+    flat = np.array([[True, True, False]])
+    out, replaced = guard_lens_means_np(x, m, mosaic, (9, 9), gain=gain, floor=floor, k=k, flat=flat,
+                                        flat_means=own, j=j)
+    np.testing.assert_allclose(out[:, :, :9], np.broadcast_to(own[0, 0][:, None, None], (3, 9, 9)), atol=1e-12)
+    plain, plain_replaced = guard_lens_means_np(x, m, mosaic, (9, 9), gain=gain, floor=floor, k=k)
+    np.testing.assert_allclose(out[:, :, 9:], plain[:, :, 9:], atol=1e-12)
+    assert replaced[0, 0] == -1 and replaced[0, 1:].tolist() == plain_replaced[0, 1:].tolist()
+    never, _ = guard_lens_means_np(x, m, mosaic, (9, 9), gain=gain, floor=floor, k=k, flat=flat, flat_means=own,
+                                   j=np.inf)  # j = inf: no lens is filled, the net of before
+    np.testing.assert_array_equal(never, plain)
+
+
 @pytest.mark.parametrize("pitch, lenses", [((9, 9), (5, 7)), ((5, 7), (3, 4)), ((1, 1), (4, 6))])
-def test_device_lens_mean_guard_matches_the_reference(runtime, rng, pitch, lenses):
+@pytest.mark.parametrize("j", [1.0, np.inf])
+def test_device_lens_mean_guard_matches_the_reference(runtime, rng, pitch, lenses, j):
     H, W = lenses[0] * pitch[0], lenses[1] * pitch[1]
     mosaic = rng.random((H, W)).astype(np.float32) - 0.05
     m = rng.random((3, H, W)).astype(np.float32)
     x = (m + 0.05 * rng.standard_normal((3, H, W))).astype(np.float32)
+    flat = rng.random(lenses) < 0.5
+    m_means = np.moveaxis(m.astype(np.float64).reshape(3, lenses[0], pitch[0], lenses[1], pitch[1]).mean(axis=(2, 4)),
+                          0, -1)
+    # own means 0-2 sds (of a lens mean at level 0.45) from Malvar's: some flat lenses past j, some within
+    own = (m_means + rng.uniform(-2, 2, m_means.shape) * np.sqrt((2e-3 * 0.45 + 1e-4) / (0.25 * pitch[0] * pitch[1])))
+    own = own.astype(np.float32)
     guard = LensGuard(runtime, (H, W), pitch)
     x_dev = runtime.to_device(x)
-    replaced = guard.guard_means(x_dev, runtime.to_device(m), runtime.to_device(mosaic), 2e-3, 1e-4, 2.0)
-    expected, expected_replaced = guard_lens_means_np(x, m, mosaic, pitch, gain=2e-3, floor=1e-4, k=2.0)
+    replaced = guard.guard_means(x_dev, runtime.to_device(m), runtime.to_device(mosaic), 2e-3, 1e-4, 2.0, flat, own, j)
+    expected, expected_replaced = guard_lens_means_np(x, m, mosaic, pitch, gain=2e-3, floor=1e-4, k=2.0, flat=flat,
+                                                      flat_means=own, j=j)
     np.testing.assert_allclose(x_dev.get(), expected, atol=2e-6)
     np.testing.assert_array_equal(replaced, expected_replaced)
-    assert 0 < expected_replaced.sum() < 3 * lenses[0] * lenses[1]  # both kinds of lens occur
+    if np.isfinite(j):  # flat lenses past j and within it occur
+        assert 0 < (expected_replaced < 0).sum() < flat.sum()
+    else:  # no lens filled, and both kinds of soft-thresholded lens occur
+        assert (expected_replaced >= 0).all() and 0 < expected_replaced.sum() < 3 * flat.size

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from lfcl.demosaic.driver import demosaic_grid
+from lfcl.demosaic.flat_lenses import flat_lenses
 from lfcl.demosaic.names import DEFAULT_METHOD
-from lfcl.demosaic.safety_net import NET_K, net_k
+from lfcl.demosaic.safety_net import FLAT_J, NET_K, net_k
 from lfcl.grid.model import AlignedGrid
 from lfcl.noise.model import NoiseEstimate
 from lfcl.ops.lensguard import guard_lens_means_np
@@ -53,16 +54,50 @@ def test_with_the_net_no_view_is_worse_than_malvar(finetexture, lux, method):
 
 def test_the_net_is_the_lens_mean_guard_against_malvar_of_the_same_mosaic(rng):
     mosaic = (0.3 + 0.05 * rng.standard_normal((27, 36))).astype(np.float32)
+    mosaic[:9, :9] = np.where(np.arange(9)[:, None] % 2 == np.arange(9) % 2, 0.2, 0.6)  # a flat lens, GRBG
+    mosaic[:9, 9:18] = 0.9  # beside a bright one: its Malvar means read this lens
     noise = NoiseEstimate(gain=1e-3, floor=1e-5, sigma=0.018, source="test")
     plain = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=noise, iterations=3, safety_net=False)
     netted = demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "admm-uv", noise=noise, iterations=3)
+    flat = flat_lenses(mosaic, "GRBG", (9, 9), noise)
     expected, replaced = guard_lens_means_np(plain.planes, malvar_np(mosaic, "GRBG"), mosaic, (9, 9),
-                                             gain=noise.gain, floor=noise.floor, k=NET_K)
+                                             gain=noise.gain, floor=noise.floor, k=NET_K, flat=flat.flat,
+                                             flat_means=flat.means, j=FLAT_J)
     np.testing.assert_allclose(netted.planes, expected, atol=2e-5)
     report = netted.parameters["safety_net"]
-    assert report["lenses"] == 12 and report["colour_means_from_malvar"] == int(replaced.sum())
+    assert report["lenses"] == 12 and report["colour_means_from_malvar"] == int(replaced[replaced > 0].sum())
     assert report["lenses_from_malvar"] == int((replaced == 3).sum()) and "Malvar" in report["why"]
+    assert report["lenses_filled_flat"] == int((replaced < 0).sum()) >= 1 and replaced[0, 0] == -1
+    np.testing.assert_allclose(netted.planes[:, :9, :9].reshape(3, -1).T, [[0.6, 0.2, 0.6]] * 81, atol=1e-6)
     assert "safety_net" not in plain.parameters
+
+
+def test_the_net_keeps_an_in_focus_lens_scale_grating_above_malvar():
+    """A grey grating of period 2.5 lenses in focus at 50 lux: its lenses are flat and their colour alternates at the
+    lens scale, so Malvar's lens means read the neighbours'. Pulled towards them (the net before flat lenses were
+    filled, j = inf) the default's centre view was below Malvar's; filled with their own means, it is above."""
+    from lfcl.evaluation.evaluate import run_method, simulation_capture
+    from lfcl.evaluation.metrics import centre_view, psnr
+    from lfcl.layout import LightFieldShape, planes_to_exchange
+    from lfcl.noise.model import from_noise_profile
+    from lfcl.sim import simulate
+    from lfcl.sim.periodic import SineGrating
+    from lfcl.sim.planes import Plane
+
+    capture = simulation_capture(simulate(planes=[Plane("grating", 0.0, SineGrating(2.5, 0.7))], lenses=(24, 24),
+                                          lux=50, seed=3))
+    malvar, default = run_method(capture, "malvar"), run_method(capture, DEFAULT_METHOD)
+    assert default["parameters"]["auto"]["method"] == "admm-uv-xc"  # the cheaper band, where the net runs
+    assert default["parameters"]["safety_net"]["lenses_filled_flat"] > 24 * 24 // 2
+    assert default["psnr_center"] > malvar["psnr_center"] + 3 and default["psnr_mean"] > malvar["psnr_mean"] + 3
+    noise = from_noise_profile(capture.noise_profile, capture.mosaic)
+    grid = AlignedGrid(capture.pitch)
+    own = demosaic_grid(capture.mosaic, capture.pattern, grid, "admm-uv-xc", noise=noise,
+                        safety_net=False).planes
+    pulled, _ = guard_lens_means_np(own, malvar_np(capture.mosaic, capture.pattern), capture.mosaic, capture.pitch,
+                                    gain=noise.gain, floor=noise.floor, k=NET_K)
+    lightfield = planes_to_exchange(pulled.astype(np.float32), LightFieldShape.from_exchange(capture.truth))
+    assert psnr(centre_view(lightfield), centre_view(capture.truth)) < malvar["psnr_center"]
 
 
 def test_malvar_needs_no_net_and_auto_records_it_once(rng):

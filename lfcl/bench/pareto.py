@@ -120,14 +120,15 @@ def _admm_method(label: str) -> str | None:
 
 
 def run(capture: Capture, budgets, reference_budgets=None, methods=ADMM_METHODS, repeats: int = 1,
-        device=None, progress=None, skip_flat: bool | None = None) -> dict:
+        device=None, progress=None, skip_flat: bool | None = None, safety_net: bool = True) -> dict:
     """Every (method, budget) point and the peers on ``capture``; a JSON-ready dict.
 
     ``reference_budgets``: budgets for the numpy reference ADMM (None: those of
     ``budgets`` up to 10; empty: skip it). ``progress(label)`` is called before
     each point. ``skip_flat``: as ``demosaic_grid``'s (None: each method's default,
     which for admm-uv and admm-uv-xc leaves flat lenses out; False: every lens solved,
-    like the numpy reference).
+    like the numpy reference). ``safety_net``: lfcl's methods with the net (as `lfcl process` runs them); False: the
+    solvers alone, like the numpy reference.
     """
     from ..device import get_runtime
     from ..ops.malvar import malvar_np
@@ -158,7 +159,7 @@ def run(capture: Capture, budgets, reference_budgets=None, methods=ADMM_METHODS,
         method, start = parse_method_spec(label)
         return demosaic_grid(mosaic, pattern, AlignedGrid(pitch), method, iterations=iterations,
                              noise=None if method == "malvar" else noise, device=device, start=start,
-                             skip_flat=skip_flat if iterations is not None else None)
+                             skip_flat=skip_flat if iterations is not None else None, safety_net=safety_net)
 
     points = []
     # the direct methods: warm-up (program build), then timed
@@ -208,6 +209,7 @@ def run(capture: Capture, budgets, reference_budgets=None, methods=ADMM_METHODS,
         "budgets": budgets,
         "reference_budgets": list(reference_budgets),
         "skip_flat": skip_flat,
+        "safety_net": safety_net,
         "repeats": repeats,
         "points": points,
     }

@@ -36,7 +36,7 @@ import numpy as np
 import scipy.special
 
 from ..noise.model import NoiseEstimate
-from ..ops.flatlens import colour_counts, lens_flatness_np
+from ..ops.flatlens import LensFlatness, colour_counts, lens_flatness_np
 from ..ops.lenscopy import fill_lenses_np
 from .names import FLAT_P, SKIPPABLE  # noqa: F401  (SKIPPABLE: re-exported for lfcl.demosaic.methods)
 
@@ -99,6 +99,16 @@ def flat_lenses(mosaic: np.ndarray, pattern: str, pitch, noise: NoiseEstimate, *
     testable = (counts >= 2).all(axis=-1) & np.isfinite(statistics).all(axis=-1)
     flat = testable & (p_value > threshold)
     return FlatLenses(flat, statistics[..., :3].astype(np.float64), p_value, float(threshold))
+
+
+def flat_lenses_on_device(runtime, device_mosaic, mosaic: np.ndarray, pattern: str, pitch, noise: NoiseEstimate, *,
+                          origin=(0, 0), lens_weights=None, threshold: float = FLAT_P) -> FlatLenses:
+    """:func:`flat_lenses` with the per-lens statistics computed on the device from ``device_mosaic`` (``mosaic``
+    there): only the [S, T, 4] statistics come back to the host."""
+    statistics = LensFlatness(runtime, mosaic.shape, pattern, pitch, origin)(device_mosaic, lens_weights, noise.gain,
+                                                                             noise.floor)
+    return flat_lenses(mosaic, pattern, pitch, noise, origin=origin, lens_weights=lens_weights, threshold=threshold,
+                       statistics=statistics)
 
 
 def fill_flat(planes: np.ndarray, found: FlatLenses, pitch) -> np.ndarray:

@@ -41,13 +41,12 @@ from ..device import get_runtime, memory_text
 from ..grid.vignetting import flat_field
 from ..layout import LightFieldShape
 from ..noise.model import NoiseEstimate, estimate_noise
-from ..ops.flatlens import LensFlatness
 from ..ops.lenscopy import LensCopy
 from ..ops.malvar import Malvar, malvar_planes
 from ..ops.reduce import Reductions
 from ..solvers.admm import AdmmSolver, solver_bytes, solver_largest_buffer
 from ..solvers.params import AdmmParams, BandedResult
-from .flat_lenses import FLAT_P, SKIPPABLE, fill_flat, flat_lenses, pack_lenses
+from .flat_lenses import FLAT_P, SKIPPABLE, fill_flat, flat_lenses_on_device, pack_lenses
 from .names import METHODS, STARTS  # noqa: F401  (STARTS: re-exported for lfcl.pipeline.stages and lfcl.bench)
 
 
@@ -252,9 +251,11 @@ def with_safety_net(result: DemosaicResult, mosaic, pattern, pitch, origin, lens
     if noise is None:  # a raw too small to estimate the noise from: the outputs say the net did not act
         report = {"lenses": 0, "lenses_from_malvar": 0, "why": why.replace("not tested", "not applied")}
         return dataclasses.replace(result, parameters={**result.parameters, "safety_net": report})
+    lens_weights = None
     if lens_response is not None:
-        mosaic, _ = flat_field(mosaic, lens_response)
-    planes, report = apply_safety_net(get_runtime(device), result.planes, mosaic, pattern, pitch, origin, noise, k)
+        mosaic, lens_weights = flat_field(mosaic, lens_response)
+    planes, report = apply_safety_net(get_runtime(device), result.planes, mosaic, pattern, pitch, origin, noise, k,
+                                      lens_weights)
     _check_finite(planes, "the safety net", mosaic)
     return dataclasses.replace(result, planes=planes, parameters={**result.parameters, "safety_net": report},
                                seconds=result.seconds + time.perf_counter() - began, noise=noise)
@@ -346,10 +347,8 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
                 depth, depth_seconds = epi_disparity(raw_mosaic, pattern, pitch, origin, noise, device)
             flat = None
             if method == "admm-epi":  # lenses flat within the noise have no lines to get wrong
-                statistics = LensFlatness(runtime, mosaic.shape, pattern, pitch, origin)(b, lens_weights, noise.gain,
-                                                                                           noise.floor)
-                flat = flat_lenses(mosaic, pattern, pitch, noise, origin=origin, lens_weights=lens_weights,
-                                   statistics=statistics).flat
+                flat = flat_lenses_on_device(runtime, b, mosaic, pattern, pitch, noise, origin=origin,
+                                             lens_weights=lens_weights).flat
             malvar = Malvar(runtime, mosaic.shape, pattern, origin).forward(b)
             x0, guard = guarded_start(runtime, x0, malvar, b, pitch, noise, depth=depth, flat=flat)
             del malvar
@@ -373,10 +372,8 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
                                                    device=device)
         noise = noise if noise is not None else flat_noise
     if flat_noise is not None:  # flat lenses get their colour means and leave the solve (lfcl/demosaic/flat_lenses.py)
-        statistics = LensFlatness(runtime, mosaic.shape, pattern, pitch, origin)(b, lens_weights, flat_noise.gain,
-                                                                                 flat_noise.floor)
-        found = flat_lenses(mosaic, pattern, pitch, flat_noise, origin=origin, lens_weights=lens_weights,
-                            threshold=flat_threshold, statistics=statistics)
+        found = flat_lenses_on_device(runtime, b, mosaic, pattern, pitch, flat_noise, origin=origin,
+                                      lens_weights=lens_weights, threshold=flat_threshold)
         packing = pack_lenses(~found.flat) if found.flat.any() else None
         if packing is not None and packing.grid[0] == packing.full[0] and not found.flat.all():
             packing = None  # too few to shrink the solver: packing, filling and a new size would only cost

@@ -48,37 +48,50 @@ __kernel void take_lenses(__global float *x, __global const float *from, __globa
 // k sd, sd = sqrt(var(level) / (U V / 4)) (the noise of a mean of a quarter of the lens's samples,
 // var = gain * max(level, 0) + floor): x_c += soft(dx, k sd) - dx over the lens, so that x's lens
 // mean moves to Malvar's where the two agree within k sd and to within k sd of it elsewhere.
-// replaced[s * T + t] = how many colours were moved all the way (|dx| <= k sd), 0..3.
+// A lens marked flat whose Malvar mean of some colour lies more than j sd from own[lens][c] (the mean of its
+// own samples) is filled with own[lens][c] instead: Malvar's filters read another micro-image there.
+// replaced[s * T + t] = how many colours were moved all the way (|dx| <= k sd), 0..3, or -1 for a filled lens.
 __kernel void guard_lens_means(__global float *x, __global const float *m, __global const float *mosaic,
+                               __global const uchar *flat, __global const float *own,
                                __global float *replaced, const int height, const int width,
-                               const float gain, const float noise_floor, const float k)
+                               const float gain, const float noise_floor, const float k, const float j)
 {
     const int t = get_global_id(0), s = get_global_id(1);
     const int lenses_t = width / PITCH_V;
     if (t >= lenses_t || s >= height / PITCH_U) return;
-    const size_t plane = (size_t)height * width;
+    const size_t plane = (size_t)height * width, lens = (size_t)s * lenses_t + t;
     const float samples = (float)(PITCH_U * PITCH_V);
     float level = 0.0f;
     for (int u = 0; u < PITCH_U; ++u)
         for (int v = 0; v < PITCH_V; ++v)
             level += mosaic[(size_t)(s * PITCH_U + u) * width + t * PITCH_V + v];
     const float variance = fmax(gain * fmax(level / samples, 0.0f) + noise_floor, FLT_MIN);
-    const float limit = k * sqrt(variance / (0.25f * samples));
-    float moved = 0.0f;
+    const float sd = sqrt(variance / (0.25f * samples)), limit = k * sd;
+    float x_mean[3], m_mean[3];
+    int fill = 0;
     for (int c = 0; c < 3; ++c) {
-        float dx = 0.0f;
+        float xs = 0.0f, ms = 0.0f;
         for (int u = 0; u < PITCH_U; ++u)
             for (int v = 0; v < PITCH_V; ++v) {
                 const size_t i = c * plane + (size_t)(s * PITCH_U + u) * width + t * PITCH_V + v;
-                dx += x[i] - m[i];
+                xs += x[i];
+                ms += m[i];
             }
-        dx /= samples;
+        x_mean[c] = xs / samples;
+        m_mean[c] = ms / samples;
+        fill |= flat[lens] && fabs(m_mean[c] - own[lens * 3 + c]) > j * sd;
+    }
+    float moved = 0.0f;
+    for (int c = 0; c < 3; ++c) {
+        const float dx = x_mean[c] - m_mean[c];
         const float kept = copysign(fmax(fabs(dx) - limit, 0.0f), dx);
         moved += fabs(dx) <= limit ? 1.0f : 0.0f;
         const float shift = kept - dx;
         for (int u = 0; u < PITCH_U; ++u)
-            for (int v = 0; v < PITCH_V; ++v)
-                x[c * plane + (size_t)(s * PITCH_U + u) * width + t * PITCH_V + v] += shift;
+            for (int v = 0; v < PITCH_V; ++v) {
+                const size_t i = c * plane + (size_t)(s * PITCH_U + u) * width + t * PITCH_V + v;
+                x[i] = fill ? own[lens * 3 + c] : x[i] + shift;
+            }
     }
-    replaced[(size_t)s * lenses_t + t] = moved;
+    replaced[lens] = fill ? -1.0f : moved;
 }

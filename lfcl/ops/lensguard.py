@@ -51,12 +51,18 @@ def take_lenses_np(x: np.ndarray, source: np.ndarray, chosen: np.ndarray, pitch)
 
 
 def guard_lens_means_np(x: np.ndarray, malvar: np.ndarray, mosaic: np.ndarray, pitch, *, gain: float,
-                        floor: float, k: float) -> tuple[np.ndarray, np.ndarray]:
+                        floor: float, k: float, flat: np.ndarray | None = None, flat_means: np.ndarray | None = None,
+                        j: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
     """The safety net's lens-mean guard (lfcl/kernels/lensguard.cl ``guard_lens_means``), float64.
 
     Returns (x with each lens's colour means soft-thresholded towards Malvar's at ``k`` sd, sd the
-    noise of a mean of a quarter of the lens's samples at its level; the number of colours [S, T]
-    moved all the way to Malvar's mean).
+    noise of a mean of a quarter of the lens's samples at its level; per lens [S, T], the number of
+    colours moved all the way to Malvar's mean, or -1 for a lens filled with its own means).
+
+    ``flat`` [S, T] (bool) and ``flat_means`` [S, T, 3]: the lenses flat within the noise and the
+    colour means of their own samples (lfcl/demosaic/flat_lenses.py). A flat lens any of whose
+    Malvar colour means lies more than ``j`` sd from its own is filled with its own means instead:
+    Malvar's filters read a different micro-image across its border (lfcl/demosaic/safety_net.py).
     """
     U, V = pitch
     H, W = mosaic.shape
@@ -66,11 +72,19 @@ def guard_lens_means_np(x: np.ndarray, malvar: np.ndarray, mosaic: np.ndarray, p
     x5 = np.asarray(x, np.float64).reshape(3, S, U, T, V)
     m5 = np.asarray(malvar, np.float64).reshape(3, S, U, T, V)
     level = np.clip(np.asarray(mosaic, np.float64).reshape(S, U, T, V).mean(axis=(1, 3)), 0.0, None)
-    limit = k * np.sqrt(np.maximum(gain * level + floor, VARIANCE_FLOOR) / (0.25 * U * V))
-    dx = (x5 - m5).mean(axis=(2, 4))  # [3, S, T]
+    sd = np.sqrt(np.maximum(gain * level + floor, VARIANCE_FLOOR) / (0.25 * U * V))
+    limit = k * sd
+    malvar_means = m5.mean(axis=(2, 4))  # [3, S, T]
+    dx = x5.mean(axis=(2, 4)) - malvar_means
     kept = np.sign(dx) * np.maximum(np.abs(dx) - limit, 0.0)
     out = x5 + (kept - dx)[:, :, None, :, None]
-    return out.reshape(np.shape(x)), (np.abs(dx) <= limit).sum(axis=0).astype(np.float64)
+    replaced = (np.abs(dx) <= limit).sum(axis=0).astype(np.float64)
+    if flat is not None:
+        own = np.moveaxis(np.asarray(flat_means, np.float64).reshape(S, T, 3), -1, 0)  # [3, S, T]
+        fill = np.asarray(flat, bool).reshape(S, T) & (np.abs(malvar_means - own) > j * sd).any(axis=0)
+        out = np.where(fill[None, :, None, :, None], own[:, :, None, :, None], out)
+        replaced[fill] = -1.0
+    return out.reshape(np.shape(x)), replaced
 
 
 class LensGuard:
@@ -93,16 +107,30 @@ class LensGuard:
                             defines=grid_defines(self.pitch, 0))
         return self._out.get().astype(np.float64)
 
-    def guard_means(self, x, malvar, mosaic, gain: float, floor: float, k: float) -> np.ndarray:
-        """:func:`guard_lens_means_np` in place on the device ``x``; the [S, T] replaced-colour counts."""
+    def guard_means(self, x, malvar, mosaic, gain: float, floor: float, k: float, flat=None, flat_means=None,
+                    j: float = np.inf) -> np.ndarray:
+        """:func:`guard_lens_means_np` in place on the device ``x``; the [S, T] counts (-1: filled flat).
+
+        ``flat`` [S, T] and ``flat_means`` [S, T, 3] on the host, or None: no lens is filled.
+        """
         planes = (3, self.height, self.width)
         check_device_array(x, planes, "x")
         check_device_array(malvar, planes, "malvar")
         check_device_array(mosaic, (self.height, self.width), "mosaic")
         S, T = self.lenses
+        if flat is None:
+            flat, flat_means = np.zeros((S, T), bool), np.zeros((S, T, 3))
+        if np.shape(flat) != (S, T) or np.shape(flat_means) != (S, T, 3):
+            raise ValueError(f"flat and flat_means must be [{S}, {T}] and [{S}, {T}, 3], got {np.shape(flat)} and "
+                             f"{np.shape(flat_means)}")
+        marks = self.runtime.to_device(np.ascontiguousarray(flat, dtype=np.uint8))
+        means = self.runtime.to_device(np.ascontiguousarray(flat_means, dtype=np.float32))
+        # an infinite j (no lens filled) as the largest float: the comparison stays exact without inf arithmetic
+        j32 = np.float32(min(float(j), float(np.finfo(np.float32).max)))
         self.runtime.launch("lensguard", "guard_lens_means", (T, S), x.data, malvar.data, mosaic.data,
-                            self._out.data, np.int32(self.height), np.int32(self.width), np.float32(gain),
-                            np.float32(floor), np.float32(k), defines=grid_defines(self.pitch, 0))
+                            marks.data, means.data, self._out.data, np.int32(self.height), np.int32(self.width),
+                            np.float32(gain), np.float32(floor), np.float32(k), j32,
+                            defines=grid_defines(self.pitch, 0))
         return self._out.get().astype(np.float64)
 
     def take(self, x, source, chosen: np.ndarray):

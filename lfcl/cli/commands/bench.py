@@ -75,13 +75,16 @@ def capture_source(func):
 @click.option("--skip-flat", is_flag=True,
               help="Leave flat lenses out of the solve (admm-uv, admm-uv-xc; lfcl process --skip-flat, off by "
                    "default since it took fine texture for noise); default: every lens solved, as the reference.")
+@click.option("--safety-net/--no-safety-net", default=True, show_default=True,
+              help="lfcl's methods with the safety net, as lfcl process runs them; off: the solver alone, like the "
+                   "numpy reference.")
 @click.option("-o", "--output", "out_dir", default=None, type=click.Path(file_okay=False, path_type=Path),
               help="Folder for pareto.json, pareto.md and pareto.png. Default: CAPTURE_DIR/pareto, else ./pareto.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results as JSON instead of a table.")
 @device_option
 @user_errors
 def pareto_command(capture_dir, lenses, lux, scene, seed, budgets, reference_budgets, methods, repeats, skip_flat,
-                   out_dir, as_json, device):
+                   safety_net, out_dir, as_json, device):
     """PSNR (centre view, mean image) against seconds for every method and iteration budget, with peers."""
     from ...bench import pareto
     from ...bench.timing import parse_ints, parse_size
@@ -99,7 +102,7 @@ def pareto_command(capture_dir, lenses, lux, scene, seed, budgets, reference_bud
     out_dir = out_dir or (capture_dir / "pareto" if capture_dir is not None else Path("pareto"))
     progress = None if as_json else (lambda label: click.echo(f"  {label} ...", err=True))
     report = pareto.run(capture, budget_list, reference_list, method_list, repeats=repeats, device=device,
-                        progress=progress, skip_flat=True if skip_flat else None)
+                        progress=progress, skip_flat=True if skip_flat else None, safety_net=safety_net)
     table = pareto.format_report(report)
     figure = pareto.plot(report, out_dir / "pareto.png")
     report["files"] = {"json": str(out_dir / "pareto.json"), "markdown": str(out_dir / "pareto.md"), "plot": str(figure)}
