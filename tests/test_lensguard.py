@@ -104,8 +104,8 @@ def test_lens_mean_guard_fills_a_flat_lens_whose_malvar_means_read_another_lens(
 
 
 @pytest.mark.parametrize("pitch, lenses", [((9, 9), (5, 7)), ((5, 7), (3, 4)), ((1, 1), (4, 6))])
-@pytest.mark.parametrize("j", [1.0, np.inf])
-def test_device_lens_mean_guard_matches_the_reference(runtime, rng, pitch, lenses, j):
+@pytest.mark.parametrize("k, j", [(2.0, 1.0), (2.0, np.inf), (np.inf, 1.0)])
+def test_device_lens_mean_guard_matches_the_reference(runtime, rng, pitch, lenses, k, j):
     H, W = lenses[0] * pitch[0], lenses[1] * pitch[1]
     mosaic = rng.random((H, W)).astype(np.float32) - 0.05
     m = rng.random((3, H, W)).astype(np.float32)
@@ -118,12 +118,19 @@ def test_device_lens_mean_guard_matches_the_reference(runtime, rng, pitch, lense
     own = own.astype(np.float32)
     guard = LensGuard(runtime, (H, W), pitch)
     x_dev = runtime.to_device(x)
-    replaced = guard.guard_means(x_dev, runtime.to_device(m), runtime.to_device(mosaic), 2e-3, 1e-4, 2.0, flat, own, j)
-    expected, expected_replaced = guard_lens_means_np(x, m, mosaic, pitch, gain=2e-3, floor=1e-4, k=2.0, flat=flat,
+    replaced = guard.guard_means(x_dev, runtime.to_device(m), runtime.to_device(mosaic), 2e-3, 1e-4, k, flat, own, j)
+    expected, expected_replaced = guard_lens_means_np(x, m, mosaic, pitch, gain=2e-3, floor=1e-4, k=k, flat=flat,
                                                       flat_means=own, j=j)
     np.testing.assert_allclose(x_dev.get(), expected, atol=2e-6)
     np.testing.assert_array_equal(replaced, expected_replaced)
+    filled = expected_replaced < 0
     if np.isfinite(j):  # flat lenses past j and within it occur
-        assert 0 < (expected_replaced < 0).sum() < flat.sum()
-    else:  # no lens filled, and both kinds of soft-thresholded lens occur
-        assert (expected_replaced >= 0).all() and 0 < expected_replaced.sum() < 3 * flat.size
+        assert 0 < filled.sum() < flat.sum()
+    else:
+        assert not filled.any()
+    if np.isfinite(k) and np.isinf(j):  # both kinds of soft-thresholded lens occur
+        assert 0 < expected_replaced.sum() < 3 * expected_replaced.size
+    elif np.isinf(k):  # no soft threshold: every lens not filled is x's own
+        assert (expected_replaced[~filled] == 0).all()
+        per_pixel = np.repeat(np.repeat(filled, pitch[0], axis=0), pitch[1], axis=1)
+        np.testing.assert_array_equal(expected[:, ~per_pixel], x[:, ~per_pixel])

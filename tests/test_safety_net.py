@@ -46,8 +46,9 @@ def test_with_the_net_no_view_is_worse_than_malvar(finetexture, lux, method):
     net = result["parameters"]["safety_net"]
     ran = result["parameters"].get("auto", {}).get("method", method)
     assert net["k"] == (None if math.isinf(net_k(ran)) else net_k(ran))  # JSON has no Infinity
-    if ran == "admm-epi":  # auto's pick in low light keeps its own lens means (docs/auto.md)
-        assert net["k"] is None and net["lenses"] == net["lenses_from_malvar"] == 0 and "not applied" in net["why"]
+    if ran == "admm-epi":  # auto's pick in low light keeps its own lens means (docs/auto.md), but for flat lenses
+        assert net["k"] is None and net["lenses_from_malvar"] == 0 and "no soft threshold" in net["why"]
+        assert net["lenses_kept"] + net["lenses_filled_flat"] == net["lenses"] == 24 * 24
     else:
         assert net["k"] == NET_K and 0 < net["lenses_from_malvar"] <= net["lenses"] == 24 * 24
 
@@ -105,17 +106,32 @@ def test_malvar_needs_no_net_and_auto_records_it_once(rng):
     assert "safety_net" not in demosaic_grid(mosaic, "GRBG", AlignedGrid((9, 9)), "malvar").parameters
 
 
-def test_admm_epi_keeps_its_own_lens_means_and_says_so(finetexture):
+def test_admm_epi_keeps_its_own_lens_means_but_flat_lenses_whose_malvar_means_read_another_lens():
+    """Checkers of pure red and pure blue lenses in focus at 2 lux, where the default runs admm-epi: its lens means are
+    its own (no soft threshold), but its in-focus lenses are not one colour (their borders keep some of the
+    neighbours'), 3.3 dB below Malvar's centre view. Filled with their own samples' means they are far above it."""
     from lfcl.demosaic.safety_net import NET_K_BY_METHOD, net_k
+    from lfcl.evaluation.evaluate import run_method, simulation_capture
+    from lfcl.sim import simulate
+    from lfcl.sim.periodic import Checker
+    from lfcl.sim.planes import Plane
 
     assert net_k("admm-epi") == NET_K_BY_METHOD["admm-epi"] == float("inf") and net_k("admm-uv") == NET_K
-    capture = finetexture[12]
-    default = demosaic_grid(capture.mosaic, capture.pattern, AlignedGrid(capture.pitch), "admm-epi", iterations=2)
-    off = demosaic_grid(capture.mosaic, capture.pattern, AlignedGrid(capture.pitch), "admm-epi", iterations=2,
-                        safety_net=False)
-    np.testing.assert_array_equal(default.planes, off.planes)
-    report = default.parameters["safety_net"]
-    assert report["lenses"] == 0 and report["why"].startswith("not applied: admm-epi's lens means are its own")
+    capture = simulation_capture(simulate(planes=[Plane("checker", 0.0, Checker(1.0, (0.95, 0, 0), (0, 0, 0.95)))],
+                                          lenses=(24, 24), lux=2, seed=0))
+    malvar, default = run_method(capture, "malvar"), run_method(capture, DEFAULT_METHOD)
+    off = run_method(capture, DEFAULT_METHOD, safety_net=False)
+    assert default["parameters"]["auto"]["method"] == "admm-epi"
+    assert off["psnr_center"] < malvar["psnr_center"] - 1  # what the fill mends
+    assert default["psnr_center"] > malvar["psnr_center"] + 3 and default["psnr_mean"] > malvar["psnr_mean"] + 3
+    report = default["parameters"]["safety_net"]
+    assert report["k"] is None and report["lenses_from_malvar"] == 0 and report["lenses_filled_flat"] > 24 * 24 // 2
+    assert report["lenses_kept"] + report["lenses_filled_flat"] == report["lenses"] == 24 * 24
+    # the lenses not filled are admm-epi's own, unmoved; the filled ones one colour each
+    changed = (default["lightfield"] != off["lightfield"]).any(axis=(2, 3, 4))  # [S, T]
+    assert changed.sum() == report["lenses_filled_flat"]
+    filled = default["lightfield"][changed]  # [n, U, V, 3]
+    np.testing.assert_array_equal(filled, np.broadcast_to(filled[:, :1, :1], filled.shape))
 
 
 def test_without_a_noise_model_the_net_says_it_did_not_act():
@@ -144,7 +160,8 @@ def test_process_summary_says_what_the_net_did(tmp_path):
     # the default writing only the centre view at 12 lux runs admm-epi, which keeps its own lens means, and says so
     default = CliRunner().invoke(cli, [*base, "-o", str(tmp_path / "default")])
     assert default.exit_code == 0, default.output
-    assert "method auto -> admm-epi" in default.output and "safety net: not applied" in default.output
+    assert "method auto -> admm-epi" in default.output and "safety net: 576 of 576 lenses kept the method's own" \
+        in default.output
     assert "disparity" in json.loads((tmp_path / "default" / "summary.json").read_text())["seconds"]
     # where the noise model came from (docs/noise.md): the simulated DNG carries a NoiseProfile
     assert "noise: sigma " in text.output and "(the DNG's noise profile)" in text.output

@@ -239,12 +239,7 @@ def with_safety_net(result: DemosaicResult, mosaic, pattern, pitch, origin, lens
     """``result`` after the safety net (lfcl/demosaic/safety_net.py), on the mosaic the method saw."""
     from .safety_net import apply_safety_net, net_k
 
-    k = net_k(result.method)
-    if math.isinf(k):
-        report = {"k": None, "lenses": 0, "lenses_from_malvar": 0,
-                  "why": f"not applied: {result.method}'s lens means are its own (fitted per method on the training "
-                         "captures, lfcl/demosaic/safety_net.py)"}
-        return dataclasses.replace(result, parameters={**result.parameters, "safety_net": report})
+    k = net_k(result.method)  # inf: no soft threshold, only the flat lenses' fill
     began = time.perf_counter()
     mosaic = np.ascontiguousarray(mosaic, dtype=np.float32)
     noise, why = _noise_model_or_why(result.noise, mosaic, pattern, pitch, origin, asked=None, device=device)

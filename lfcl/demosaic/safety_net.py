@@ -24,8 +24,8 @@ samples' means are the unbiased estimate of it, and Malvar's can only have moved
 micro-image across the lens border: in-focus content that changes at the lens scale (a grating of 2.5 lenses, a
 checker of 1-2 lens squares), where the net pulled every lens towards Malvar's wrong means and put the default
 2-29 dB below Malvar's centre view (docs/auto.md, "Flat lenses the net fills"). Such a lens is filled with its own
-colour means. It runs on the device after any method but Malvar; its work is one pass over the planes and one
-over the mosaic (BENCHMARKS.md).
+colour means. It runs on the device after any method but Malvar (after admm-epi the fill alone: ``NET_K_BY_METHOD``);
+its work is one pass over the planes and one over the mosaic (BENCHMARKS.md).
 """
 
 from __future__ import annotations
@@ -42,22 +42,25 @@ from .flat_lenses import flat_lenses_on_device
 #: (charts, deadleaves, finetexture at seeds 1 and 2, four training photographs): the best worst case over
 #: admm-uv, admm-uvst and admm-uv-xc, -0.02 dB (k = 3: -0.25, no net: -0.79; docs/auto.md).
 NET_K = 8.0
-#: Methods with their own threshold, fitted the same way (``research/fit_safety_net.py --methods M``); inf: the net
-#: does not run. admm-epi averages each colour along the epipolar lines over ~81 samples of many lenses, so its lens
-#: means are better than Malvar's where they agree within the noise: on the training captures every finite k
-#: replaced them and cost the median mean image 1.6 dB and the median centre view 0.5 dB, for no better worst case
-#: (+0.00 dB at k = 3-32, +0.03 without the net; docs/auto.md).
+#: Methods with their own threshold, fitted the same way (``research/fit_safety_net.py --methods M``); inf: no soft
+#: threshold, the method keeps its lens means (only flat lenses are filled, ``FLAT_J``). admm-epi averages each colour
+#: along the epipolar lines over ~81 samples of many lenses, so its lens means are better than Malvar's where they
+#: agree within the noise: on the training captures every finite k replaced them and cost the median mean image
+#: 1.6 dB and the median centre view 0.5 dB, for no better worst case (+0.00 dB at k = 3-32, +0.03 without the net;
+#: docs/auto.md).
 NET_K_BY_METHOD = {"admm-epi": float("inf")}
 #: A flat lens whose Malvar colour mean lies further than this many noise sds of a lens mean from its own samples'
-#: mean is filled with its own means (module docstring). research/fit_safety_net.py at NET_K on the same training
-#: captures: of the j that leave the worst case no lower than the net without filling (-0.04 dB), the largest median
-#: mean-image gain, +0.52 dB against +0.00 (0.5 sd: worst -0.07, 0 sd, every flat lens: -0.25, the training
-#: photographs' mean image at 0.5 lux; docs/auto.md "Flat lenses the net fills").
+#: mean is filled with its own means (module docstring); every method. research/fit_safety_net.py at NET_K on the same
+#: training captures: of the j that leave the worst case no lower than the net without filling (-0.04 dB), the
+#: largest median mean-image gain, +0.52 dB against +0.00 (0.5 sd: worst -0.07, 0 sd, every flat lens: -0.25, the
+#: training photographs' mean image at 0.5 lux). For admm-epi (``--methods admm-epi``, no soft threshold): 0.5 and 1
+#: sd tie (worst +0.70 dB as without, median mean image +3.17 against +3.08), and a tie goes to the larger j
+#: (docs/auto.md "Flat lenses the net fills").
 FLAT_J = 1.0
 
 
 def net_k(method: str) -> float:
-    """The safety net's threshold for ``method`` (inf: the net does not run for it)."""
+    """The safety net's threshold for ``method`` (inf: no soft threshold, only the flat lenses' fill)."""
     return NET_K_BY_METHOD.get(method, NET_K)
 
 
@@ -75,17 +78,22 @@ def apply_safety_net(runtime, planes: np.ndarray, mosaic: np.ndarray, pattern: s
     replaced = LensGuard(runtime, mosaic.shape, pitch).guard_means(x, malvar, b, noise.gain, noise.floor, k,
                                                                   found.flat, found.means, j)
     out = x.get()
-    lenses = int(replaced.size)
+    filled = int(np.count_nonzero(replaced < 0))
+    fill_why = (f"a lens flat within the noise whose Malvar mean lies more than {j:g} sds from its own samples' takes "
+                f"its own colour means (lfcl/demosaic/safety_net.py)")
+    if np.isinf(k):
+        why = f"no soft threshold (the method's lens means are its own, fitted per method); {fill_why}"
+    else:
+        why = (f"each lens colour mean within {k:g} noise sds of a lens mean of Malvar's takes Malvar's; the others "
+               f"move {k:g} sds towards it; {fill_why}")
     report = {
-        "k": k,
+        "k": None if np.isinf(k) else k,  # JSON has no Infinity
         "flat_j": j,
-        "lenses": lenses,
+        "lenses": int(replaced.size),
         "lenses_from_malvar": int(np.count_nonzero(replaced == 3)),
         "lenses_kept": int(np.count_nonzero(replaced == 0)),
-        "lenses_filled_flat": int(np.count_nonzero(replaced < 0)),
+        "lenses_filled_flat": filled,
         "colour_means_from_malvar": int(replaced[replaced > 0].sum()),
-        "why": f"each lens colour mean within {k:g} noise sds of a lens mean of Malvar's takes Malvar's; "
-               f"the others move {k:g} sds towards it; a lens flat within the noise whose Malvar mean lies more "
-               f"than {j:g} sds from its own samples' takes its own colour means (lfcl/demosaic/safety_net.py)",
+        "why": why,
     }
     return out, report

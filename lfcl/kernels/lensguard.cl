@@ -50,6 +50,7 @@ __kernel void take_lenses(__global float *x, __global const float *from, __globa
 // mean moves to Malvar's where the two agree within k sd and to within k sd of it elsewhere.
 // A lens marked flat whose Malvar mean of some colour lies more than j sd from own[lens][c] (the mean of its
 // own samples) is filled with own[lens][c] instead: Malvar's filters read another micro-image there.
+// k = inf: no soft threshold (x keeps its lens means; only flat lenses may be filled).
 // replaced[s * T + t] = how many colours were moved all the way (|dx| <= k sd), 0..3, or -1 for a filled lens.
 __kernel void guard_lens_means(__global float *x, __global const float *m, __global const float *mosaic,
                                __global const uchar *flat, __global const float *own,
@@ -81,12 +82,13 @@ __kernel void guard_lens_means(__global float *x, __global const float *m, __glo
         m_mean[c] = ms / samples;
         fill |= flat[lens] && fabs(m_mean[c] - own[lens * 3 + c]) > j * sd;
     }
+    const int soft = !isinf(k);
     float moved = 0.0f;
     for (int c = 0; c < 3; ++c) {
         const float dx = x_mean[c] - m_mean[c];
         const float kept = copysign(fmax(fabs(dx) - limit, 0.0f), dx);
-        moved += fabs(dx) <= limit ? 1.0f : 0.0f;
-        const float shift = kept - dx;
+        moved += soft && fabs(dx) <= limit ? 1.0f : 0.0f;
+        const float shift = soft ? kept - dx : 0.0f;
         for (int u = 0; u < PITCH_U; ++u)
             for (int v = 0; v < PITCH_V; ++v) {
                 const size_t i = c * plane + (size_t)(s * PITCH_U + u) * width + t * PITCH_V + v;

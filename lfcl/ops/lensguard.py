@@ -57,7 +57,8 @@ def guard_lens_means_np(x: np.ndarray, malvar: np.ndarray, mosaic: np.ndarray, p
 
     Returns (x with each lens's colour means soft-thresholded towards Malvar's at ``k`` sd, sd the
     noise of a mean of a quarter of the lens's samples at its level; per lens [S, T], the number of
-    colours moved all the way to Malvar's mean, or -1 for a lens filled with its own means).
+    colours moved all the way to Malvar's mean, or -1 for a lens filled with its own means). ``k`` inf:
+    no soft threshold, every lens keeps its means (the net of a method that has none: admm-epi's).
 
     ``flat`` [S, T] (bool) and ``flat_means`` [S, T, 3]: the lenses flat within the noise and the
     colour means of their own samples (lfcl/demosaic/flat_lenses.py). A flat lens any of whose
@@ -76,9 +77,12 @@ def guard_lens_means_np(x: np.ndarray, malvar: np.ndarray, mosaic: np.ndarray, p
     limit = k * sd
     malvar_means = m5.mean(axis=(2, 4))  # [3, S, T]
     dx = x5.mean(axis=(2, 4)) - malvar_means
-    kept = np.sign(dx) * np.maximum(np.abs(dx) - limit, 0.0)
-    out = x5 + (kept - dx)[:, :, None, :, None]
-    replaced = (np.abs(dx) <= limit).sum(axis=0).astype(np.float64)
+    if np.isinf(k):  # no soft threshold: every lens keeps its own means (only flat lenses may be filled)
+        out, replaced = x5, np.zeros(dx.shape[1:])
+    else:
+        kept = np.sign(dx) * np.maximum(np.abs(dx) - limit, 0.0)
+        out = x5 + (kept - dx)[:, :, None, :, None]
+        replaced = (np.abs(dx) <= limit).sum(axis=0).astype(np.float64)
     if flat is not None:
         own = np.moveaxis(np.asarray(flat_means, np.float64).reshape(S, T, 3), -1, 0)  # [3, S, T]
         fill = np.asarray(flat, bool).reshape(S, T) & (np.abs(malvar_means - own) > j * sd).any(axis=0)

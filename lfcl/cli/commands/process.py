@@ -378,9 +378,13 @@ def summary_text(raw, out_dir, summary: dict) -> str:
     elif net:
         filled = net.get("lenses_filled_flat", 0)
         mixed = net["lenses"] - net["lenses_from_malvar"] - net["lenses_kept"] - filled
-        parts = [f"{net['lenses_from_malvar']} of {net['lenses']} lenses took Malvar's colour means (within the noise)"]
-        if net["lenses_kept"]:
-            parts.append(f"{net['lenses_kept']} kept theirs, moved {net['k']:g} noise sds towards Malvar's")
+        if net["k"] is None:  # no soft threshold: the method keeps its lens means
+            parts = [f"{net['lenses_kept']} of {net['lenses']} lenses kept the method's own colour means"]
+        else:
+            parts = [f"{net['lenses_from_malvar']} of {net['lenses']} lenses took Malvar's colour means (within the "
+                     "noise)"]
+            if net["lenses_kept"]:
+                parts.append(f"{net['lenses_kept']} kept theirs, moved {net['k']:g} noise sds towards Malvar's")
         if filled:
             parts.append(f"{filled} flat ones took their own samples' means (Malvar's read a neighbouring lens)")
         if mixed:
