@@ -6,8 +6,8 @@ TOLERANCE and MIN_PAIRS) against the simulator's noise profile (docs/noise.md). 
     python research/fit_noise.py sweep --seeds 5,6 --real --grid before     # its "plane": the estimate until now
 
 Each row: the estimated sigma over the profile's (the truth: the simulated DNG carries the noise model
-it was made with), for the plane fit alone and for the shipped combination (the lower of plane fit and
-epipolar pairs). The fit keeps the setting with the smallest worst |log ratio| over the training rows.
+it was made with), for the plane fit alone and for the shipped combination (the lowest of the plane fit, the
+epipolar pairs and the epipolar fit; ``method`` says which). The fit keeps the setting with the smallest worst |log ratio| over the training rows.
 """
 
 from __future__ import annotations

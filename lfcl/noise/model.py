@@ -30,7 +30,7 @@ class NoiseEstimate:
     floor: float  # variance at zero signal (read noise, dark current)
     sigma: float  # rms noise per pixel over the mosaic
     source: str  # "raw" (estimated) or "dng-noise-profile"
-    method: str = ""  # of a "raw" estimate: "plane fit" (inside the micro-images) or "epipolar pairs"
+    method: str = ""  # of a "raw" estimate: "plane fit" (inside the micro-images), "epipolar pairs" or "epipolar fit"
 
     def sigma_at(self, level: float) -> float:
         return math.sqrt(max(self.gain * level + self.floor, 0.0))
@@ -42,8 +42,8 @@ class NoiseEstimate:
 # (sigma^2 chi^2_dof / dof), which is unbiased when at least that share of the lenses
 # in the bin is flat.
 QUANTILE = 0.02  # fitted on training captures: research/fit_noise.py (docs/noise.md)
-#: Lenses with same-point pairs (lfcl.noise.epipolar) the pair estimate needs.
-MIN_PAIR_LENSES = 64
+#: Lens colours an estimate along the epipolar lines (lfcl.noise.epipolar) needs: 64 lenses' worth.
+MIN_LENS_COLOURS = 3 * 64
 
 
 def _plane_residual_variances(block: np.ndarray, mask: np.ndarray):
@@ -66,10 +66,11 @@ def estimate_noise(mosaic: np.ndarray, pattern: str, pitch, origin=(0, 0), bins:
                    light_field: bool = True, device=None) -> NoiseEstimate:
     """Poisson-Gaussian noise model of a normalised lenslet mosaic [H, W].
 
-    Two estimates, each of which texture can only inflate: the plane fit inside each micro-image (module
-    docstring) and, with ``light_field`` and at least :data:`MIN_PAIR_LENSES` lenses that have them, the
-    same-point sample pairs along the epipolar lines (:mod:`lfcl.noise.epipolar`, its disparity on
-    ``device``); the one with the lower sigma is returned (``method`` says which).
+    Three estimates, each of which texture can only inflate: the plane fit inside each micro-image (module
+    docstring) and, with ``light_field``, two along the epipolar lines (:mod:`lfcl.noise.epipolar`, its
+    disparity on ``device``), each where it has at least :data:`MIN_LENS_COLOURS` lens colours: the same-point
+    sample pairs, and a quadratic fit to each lens's samples in the scene's coordinates. The one with the lowest
+    sigma is returned (``method`` says which).
     """
     U, V = pitch
     H, W = mosaic.shape
@@ -111,15 +112,17 @@ def estimate_noise(mosaic: np.ndarray, pattern: str, pitch, origin=(0, 0), bins:
     plane = NoiseEstimate(gain, floor, math.sqrt(max(gain * level + floor, 0.0)), "raw", "plane fit")
     if not light_field:
         return plane
-    from .epipolar import tile_pair_variances
+    from .epipolar import tile_variances
 
-    levels, pair_vars, pairs = tile_pair_variances(np.asarray(mosaic, np.float32), pattern, (U, V), origin, plane,
-                                                   device)
-    if levels.size < MIN_PAIR_LENSES:
-        return plane
-    gain, floor = fit_noise_model(levels, pair_vars * pairs / scipy.special.chdtri(pairs, 1 - QUANTILE), bins)
-    pair = NoiseEstimate(gain, floor, math.sqrt(max(gain * level + floor, 0.0)), "raw", "epipolar pairs")
-    return pair if pair.sigma < plane.sigma else plane
+    best = plane
+    found = tile_variances(np.asarray(mosaic, np.float32), pattern, (U, V), origin, plane, device)
+    for method, (levels, variances, dof) in zip(("epipolar pairs", "epipolar fit"), found):
+        if levels.size < MIN_LENS_COLOURS:
+            continue
+        gain, floor = fit_noise_model(levels, variances * dof / scipy.special.chdtri(dof, 1 - QUANTILE), bins)
+        estimate = NoiseEstimate(gain, floor, math.sqrt(max(gain * level + floor, 0.0)), "raw", method)
+        best = estimate if estimate.sigma < best.sigma else best
+    return best
 
 
 def fit_noise_model(means: np.ndarray, variances: np.ndarray, bins: int) -> tuple[float, float]:
@@ -128,14 +131,26 @@ def fit_noise_model(means: np.ndarray, variances: np.ndarray, bins: int) -> tupl
     The pairs are binned by brightness (quantile bins with at least 8 members) and each
     bin keeps a low quantile of its variances: textured lenses inflate the variance, flat
     ones do not. Both coefficients are clipped at 0.
+
+    A bin must hold one brightness: one that straddles a gap in the levels (pure-colour content, whose lit and unlit
+    samples are far apart) is split at its widest gap where that is over half its span; else its low quantile is the
+    dark members' and its centre lies between them and the lit ones (the fit along the disparity read a red/blue
+    checker at 0.83x its gain and 0.58x its floor; docs/noise.md).
     """
     edges = np.unique(np.quantile(means, np.linspace(0, 1, bins + 1)))
     centres, levels = [], []
     for lo, hi in itertools.pairwise(edges):
-        inside = (means >= lo) & (means <= hi)
-        if inside.sum() >= 8:
-            centres.append(np.median(means[inside]))
-            levels.append(np.quantile(variances[inside], QUANTILE))
+        inside = np.sort(means[(means >= lo) & (means <= hi)])
+        gaps = np.diff(inside)
+        parts = [(lo, hi)]
+        if gaps.size and gaps.max() > (hi - lo) / 2:
+            cut = int(np.argmax(gaps))
+            parts = [(lo, inside[cut]), (inside[cut + 1], hi)]
+        for a, b in parts:
+            inside = (means >= a) & (means <= b)
+            if inside.sum() >= 8:
+                centres.append(np.median(means[inside]))
+                levels.append(np.quantile(variances[inside], QUANTILE))
     if len(centres) < 2:
         return 0.0, float(np.quantile(variances, QUANTILE))
     gain, floor = _non_negative_line(np.asarray(centres, np.float64), np.asarray(levels, np.float64))
