@@ -123,13 +123,15 @@ def test_auto_is_resolved_once(monkeypatch, case):
 
     monkeypatch.setattr(lfcl.demosaic.auto, "choose", counting)
     result = demosaic_grid(mosaic, pattern, grid, "auto", noise=NOISE, iterations=2)
-    assert len(calls) == 1
+    rule = isinstance(grid, AlignedGrid)  # a resampled grid runs Malvar without consulting the rule
+    assert len(calls) == rule
     resolved = resolve_auto(mosaic, pattern, grid, noise=NOISE)
-    assert len(calls) == 2 and result.parameters["auto"] == resolved.record
+    assert len(calls) == 2 * rule and result.parameters["auto"] == resolved.record
     assert result.method == resolved.method == resolved.record["method"] and resolved.method in grid.methods
     assert ("safety_net" in result.parameters) == (grid.safety_net and resolved.method != "malvar")
-    if isinstance(grid, ResampledGrid):  # no cross-lens ratio off whole lenses; a pick it lacks falls back
-        assert resolved.record["lens_ratio"] is None and resolved.start == "malvar"
+    if isinstance(grid, ResampledGrid):
+        assert (resolved.method, resolved.start, resolved.record["lens_ratio"]) == ("malvar", None, None)
+        assert "every prior of the resampled solver" in resolved.record["reason"]
     else:
         assert resolved.record["lens_ratio"] is not None
     # auto is its pick run at the picked strength and start

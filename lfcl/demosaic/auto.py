@@ -40,9 +40,8 @@ from importlib import resources
 from .names import parse_method_spec
 
 RULE_FILE = "auto_rule.json"
-#: What ``auto`` runs when the rule names a method that cannot run on the raw at hand (linear4d
-#: on a pitch without coefficients, a method a resampled grid lacks): the method that gained
-#: over malvar on every setting measured (docs/admm.md, docs/geometry.md), at strength 1.
+#: What ``auto`` runs when the rule names linear4d on an aligned grid whose pitch it has no coefficients for, at
+#: strength 1 (docs/admm.md). (A resampled grid runs Malvar: :func:`on_resampled_grid`.)
 AUTO_FALLBACK = "admm-uv"
 #: What a rule's losses are judged on: the worse of the centre view and the mean image, or one of them.
 VIEWS = ("both", "center", "mean")
@@ -371,6 +370,18 @@ def small_frame(lenses, pitch) -> AutoChoice | None:
     reason = (f"a frame of {S}x{T} lenses, fewer than {fewest} on a side: the priors' lines reach "
               f"{fewest // 2} lenses, so most lenses would lie at the frame's edge, where they lose to Malvar "
               "(docs/auto.md, \"Small frames\")")
+    return AutoChoice("malvar", 1.0, None, reason, None)
+
+
+def on_resampled_grid(kind: str) -> AutoChoice:
+    """Malvar, and why, on a resampled lens grid (``kind``: rotated, non-integer pitch, hexagonal).
+
+    There each prior the resampled solver has (admm-uv, admm-uvst, admm-st; no net, no cross-channel term, no
+    admm-epi) fell below Malvar - 0.1 dB on 10-17 of 20 training captures at each of 0.5, 2, 12 and 50 lux (hex and
+    rotated grids, charts, deadleaves, finetexture, periodic and gratings at seeds 1 and 2), worst -0.4 to -1.5 dB,
+    median gains within +-0.6 dB (docs/auto.md, "Resampled grids"): no band where one is never worse."""
+    reason = (f"a {kind} lens grid: every prior of the resampled solver (admm-uv, admm-uvst, admm-st) lost to Malvar on "
+              "most training captures at every light level there (docs/auto.md, \"Resampled grids\")")
     return AutoChoice("malvar", 1.0, None, reason, None)
 
 

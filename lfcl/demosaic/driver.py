@@ -50,12 +50,9 @@ def resolve_auto(mosaic: np.ndarray, pattern: str, grid, *, noise: NoiseEstimate
     ``costly`` False: from the rule fitted without the costly methods (``--auto-cheap``).
 
     Aligned grids: sigma of ``noise`` (None: estimated from the raw), and the raw's cross-lens ratio
-    (lfcl/demosaic/lens_ratio.py) is recorded. Resampled grids: ``noise.sigma_at`` the mean level of the measured
-    pixels (None: lfcl/noise/resampled.py), no cross-lens ratio (it needs whole lenses of integer pitch; the
-    shipped rule holds one content class, so the ratio would only be recorded). A pick the grid does not take
-    (a method not in ``grid.methods``, a start not in ``grid.starts``) becomes ``lfcl.demosaic.auto.AUTO_FALLBACK``
-    at strength 1 from the Malvar start; linear4d on a pitch it has no coefficients for is replaced as
-    lfcl.demosaic.auto.for_pitch says. The replaced pick goes into the record's ``replaced``. A frame narrower
+    (lfcl/demosaic/lens_ratio.py) is recorded. Resampled grids run Malvar (lfcl.demosaic.auto.on_resampled_grid),
+    with no noise estimate. linear4d on a pitch it has no coefficients for is replaced as
+    lfcl.demosaic.auto.for_pitch says; the replaced pick goes into the record's ``replaced``. A frame narrower
     than lfcl.demosaic.auto.min_lenses on a side runs Malvar (lfcl.demosaic.auto.small_frame), before any noise
     estimate.
     """
@@ -68,29 +65,16 @@ def resolve_auto(mosaic: np.ndarray, pattern: str, grid, *, noise: NoiseEstimate
     small = auto.small_frame(lenses, pitch)
     if small is not None:  # before the noise estimate, which a frame of a few lenses may not allow
         return AutoResolution(small.method, 1.0, None, noise, {**small.as_dict(), "view": view, "costly": costly})
-    lens_ratio = None
-    if isinstance(grid, AlignedGrid):
-        from ..noise.model import estimate_noise
-        from .lens_ratio import cross_lens_ratio
+    if not isinstance(grid, AlignedGrid):
+        malvar = auto.on_resampled_grid(grid.words)
+        return AutoResolution(malvar.method, 1.0, None, noise, {**malvar.as_dict(), "view": view, "costly": costly})
+    from ..noise.model import estimate_noise
+    from .lens_ratio import cross_lens_ratio
 
-        noise = noise if noise is not None else estimate_noise(mosaic, pattern, grid.pitch, grid.origin,
-                                                               device=device)
-        sigma = noise.sigma
-        lens_ratio = cross_lens_ratio(mosaic, grid.pitch, noise, grid.lens_response)  # content like the training's?
-    else:
-        from ..noise.resampled import estimate_grid_noise
-        from .resampled import measured
-
-        noise = noise if noise is not None else estimate_grid_noise(mosaic, grid.sampling)
-        sigma = noise.sigma_at(measured(grid.sampling, mosaic)[1])
-    choice = auto.choose(sigma, lens_ratio=lens_ratio, view=view, costly=costly)
-    ran, replaced = choice, None
-    if choice.method not in grid.methods or (choice.start is not None and choice.start not in grid.starts):
-        what = choice.method if choice.method not in grid.methods else f"{choice.method} from a {choice.start} start"
-        ran, replaced = auto.replacement(choice, f"{what} does not run on {grid.kind} lens grids",
-                                         auto.AUTO_FALLBACK, 1.0)
-    ran, for_pitch = auto.for_pitch(ran, grid.pitch)
-    replaced = replaced or for_pitch
+    noise = noise if noise is not None else estimate_noise(mosaic, pattern, grid.pitch, grid.origin, device=device)
+    lens_ratio = cross_lens_ratio(mosaic, grid.pitch, noise, grid.lens_response)  # content like the training's?
+    choice = auto.choose(noise.sigma, lens_ratio=lens_ratio, view=view, costly=costly)
+    ran, replaced = auto.for_pitch(choice, grid.pitch)
     return AutoResolution(ran.method, ran.strength, ran.start, noise,
                           {**ran.as_dict(), **({"replaced": replaced} if replaced else {})})
 

@@ -9,9 +9,8 @@ lfcl.demosaic.driver.demosaic_grid runs :func:`solve_resampled` for a :class:`lf
 ``admm-st``    regular light field onto the measured sensor pixels, so the solver
 ``admm-uvst``  fits real sensor samples, never interpolated colours
                (lfcl/solvers/resampled.py). Starts from the malvar result.
-``auto``       resolved by the driver (lfcl.demosaic.driver.resolve_auto) at the sigma lambda uses here;
-               a method the rule names that does not run here (e.g. linear4d) becomes
-               ``lfcl.demosaic.auto.AUTO_FALLBACK``.
+``auto``       resolved by the driver (lfcl.demosaic.driver.resolve_auto): Malvar, since every prior
+               here lost to it on most training captures (lfcl.demosaic.auto.on_resampled_grid).
 
 Defaults follow lfcl.demosaic.methods.ADMM_DEFAULTS (lambda per sigma, the stopping rule)
 with the corrections of :data:`GRID_TUNING`, measured on resampled grids
