@@ -246,7 +246,24 @@ def test_the_noise_line_stays_non_negative_and_fits_what_is_left():
     shot = np.repeat(np.linspace(1e-5, 3e-5, 8), 40)  # through the origin's far side: intercept < 0, refitted at 0
     gain, floor = fit_noise_model(levels, shot, bins=8)
     centres = np.linspace(0.1, 0.2, 8)
-    assert floor == 0.0 and gain == pytest.approx(centres @ np.linspace(1e-5, 3e-5, 8) / (centres @ centres), rel=1e-6)
+    # on the face floor = 0 the bins weighed by 1 / (gain x)^2 give the mean of their ratios
+    assert floor == 0.0 and gain == pytest.approx(np.mean(np.linspace(1e-5, 3e-5, 8) / centres), rel=1e-6)
+
+
+def test_the_noise_line_weighs_each_bin_by_its_own_scale():
+    # Bins from nearly black to mid-grey whose quantiles err by +-5 % of their variance: unweighted, the bright bins'
+    # scatter (4e-6) sets a floor of 1.7e-7; weighed by 1 / var^2 the dark bins pin it.
+    from lfcl.noise.model import _non_negative_line, fit_noise_model
+
+    gain, floor = 1.67e-4, 1.7e-7
+    centres = np.geomspace(1e-3, 0.5, 12)
+    scatter = 1 + 0.05 * np.resize([1, -1, -1, 1], 12)
+    levels = np.repeat(centres, 40)
+    variances = np.repeat((gain * centres + floor) * scatter, 40)
+    _, unweighted = _non_negative_line(centres, (gain * centres + floor) * scatter)
+    assert not 0.5 < unweighted / floor < 2
+    fitted_gain, fitted_floor = fit_noise_model(levels, variances, bins=12)
+    assert fitted_gain == pytest.approx(gain, rel=0.05) and fitted_floor == pytest.approx(floor, rel=0.3)
 
 
 def test_a_brightness_bin_across_a_gap_in_the_levels_is_split():

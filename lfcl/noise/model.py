@@ -42,6 +42,11 @@ class NoiseEstimate:
 # (sigma^2 chi^2_dof / dof), which is unbiased when at least that share of the lenses
 # in the bin is flat.
 QUANTILE = 0.02  # fitted on training captures: research/fit_noise.py (docs/noise.md)
+#: The noise line is refitted this many times with each brightness bin weighed by 1 / var^2 (its quantile's error is
+#: about one share of its variance), the line's variance floored at WEIGHT_FLOOR x the bins' median so that a bin at
+#: 0 does not take all the weight. Unweighted, the bright bins' scatter set the floor: 0 to 70x the truth (docs/noise.md).
+REWEIGHTS = 5
+WEIGHT_FLOOR = 0.05
 #: Lens colours an estimate along the epipolar lines (lfcl.noise.epipolar) needs: 64 lenses' worth.
 MIN_LENS_COLOURS = 3 * 64
 
@@ -153,25 +158,32 @@ def fit_noise_model(means: np.ndarray, variances: np.ndarray, bins: int) -> tupl
                 levels.append(np.quantile(variances[inside], QUANTILE))
     if len(centres) < 2:
         return 0.0, float(np.quantile(variances, QUANTILE))
-    gain, floor = _non_negative_line(np.asarray(centres, np.float64), np.asarray(levels, np.float64))
+    x, y = np.asarray(centres, np.float64), np.asarray(levels, np.float64)
+    gain, floor = _non_negative_line(x, y)
+    for _ in range(REWEIGHTS):  # each bin's quantile errs by about one share of its variance: weigh by 1 / var^2
+        line = gain * x + floor
+        if not np.median(line) > 0:
+            break
+        gain, floor = _non_negative_line(x, y, 1.0 / np.maximum(line, WEIGHT_FLOOR * float(np.median(line))) ** 2)
     if gain == 0.0 and floor <= 0.0:
         floor = float(np.quantile(variances, QUANTILE))
     return gain, floor
 
 
-def _non_negative_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """(gain, floor) of the least-squares line y = gain x + floor with both coefficients >= 0.
+def _non_negative_line(x: np.ndarray, y: np.ndarray, w: np.ndarray | None = None) -> tuple[float, float]:
+    """(gain, floor) of the (``w``-weighted) least-squares line y = gain x + floor with both coefficients >= 0.
 
     Where the free fit puts one below 0, the optimum lies on a face (gain = 0 or floor = 0): the better of the two.
     Clipping the free fit instead kept its other coefficient, which on a raw of one brightness (a flat wall)
     extrapolates a noise-steep line to 0: a floor several times the noise (docs/noise.md).
     """
-    gain, floor = (float(c) for c in np.polyfit(x, y, 1))
+    w = np.ones_like(x) if w is None else w
+    gain, floor = (float(c) for c in np.polyfit(x, y, 1, w=np.sqrt(w)))
     if gain >= 0 and floor >= 0:
         return gain, floor
-    xx = float(x @ x)
-    faces = [(0.0, max(float(y.mean()), 0.0)), (max(float(x @ y) / xx, 0.0) if xx > 0 else 0.0, 0.0)]
-    return min(faces, key=lambda line: float(np.sum((line[0] * x + line[1] - y) ** 2)))
+    wxx = float((w * x) @ x)
+    faces = [(0.0, max(float(w @ y) / float(w.sum()), 0.0)), (max(float((w * x) @ y) / wxx, 0.0) if wxx > 0 else 0.0, 0.0)]
+    return min(faces, key=lambda line: float(w @ (line[0] * x + line[1] - y) ** 2))
 
 
 def from_noise_profile(profile, mosaic: np.ndarray) -> NoiseEstimate:
