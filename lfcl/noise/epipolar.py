@@ -88,8 +88,9 @@ def pair_variances(mosaic, channels, pitch, disparity, tolerance: float = TOLERA
     offsets = view_offsets(pitch)
     shift, error = offset_shifts(disparity, pitch)
     s_all, t_all = np.meshgrid(np.arange(S), np.arange(T), indexing="ij")
-    diff2, level, count = np.zeros((3, S, T)), np.zeros((3, S, T)), np.zeros((3, S, T), np.int64)
-    shared = np.zeros(3 * S * T)  # per lens colour: sum k_i (k_i - 1), sample i in k_i of its pairs
+    # per lens colour, index (s T + t) 3 + colour: sum of squared differences, of levels, pairs, and sum k_i (k_i - 1)
+    # with sample i in k_i of its pairs
+    diff2, level, count, shared = (np.zeros(3 * S * T) for _ in range(4))
     for first in range(0, S, PAIR_ROWS):  # lens rows a slab at a time: the sample keys of a slab fit in memory
         keys = []  # (lens colour, sample) of both samples of every pair
         for k, (du, dv) in enumerate(offsets):
@@ -104,22 +105,19 @@ def pair_variances(mosaic, channels, pitch, disparity, tolerance: float = TOLERA
             s, t, s2, t2 = (a[:, None, None] for a in (s, t, s2, t2))
             a, b, colour = m4[s, u, t, v], m4[s2, u + du, t2, v + dv], c4[s, u, t, v]
             same = (colour == c4[s2, u + du, t2, v + dv]) & (a < SATURATION) & (b < SATURATION)
-            for c in range(3):
-                mine = same & (colour == c)
-                diff2[c][lens] += np.where(mine, (a - b) ** 2, 0.0).sum(axis=(1, 2))
-                level[c][lens] += np.where(mine, a + b, 0.0).sum(axis=(1, 2))
-                count[c][lens] += mine.sum(axis=(1, 2))
-            entry = (s * T + t) * 3 + colour
+            entry = ((s * T + t) * 3 + colour)[same]
+            diff2 += np.bincount(entry, weights=((a - b) ** 2)[same], minlength=3 * S * T)
+            level += np.bincount(entry, weights=(a + b)[same], minlength=3 * S * T)
+            count += np.bincount(entry, minlength=3 * S * T)
             for ps, pu, pt, pv in ((s, u, t, v), (s2, u + du, t2, v + dv)):
-                sample = ((ps * U + pu) * T + pt) * V + pv
-                keys.append(np.broadcast_to(entry * (S * U * T * V) + sample, same.shape)[same])
+                sample = np.broadcast_to(((ps * U + pu) * T + pt) * V + pv, same.shape)[same]
+                keys.append(entry * (S * U * T * V) + sample)
         if keys:
             found, k = np.unique(np.concatenate(keys), return_counts=True)
             shared += np.bincount(found // (S * U * T * V), weights=k * (k - 1.0), minlength=3 * S * T)
     ok = count >= MIN_PAIRS
     # Satterthwaite: pairs that share a sample are correlated; with sample i in k_i of a lens colour's n pairs, their
     # mean square has 4 n^2 / (4 n + sum k_i (k_i - 1)) degrees of freedom.
-    shared = shared.reshape(S, T, 3).transpose(2, 0, 1)
     dof = 4.0 * count**2 / np.maximum(4.0 * count + shared, 1)
     return level[ok] / (2.0 * count[ok]), diff2[ok] / (2.0 * count[ok]), dof[ok]
 
