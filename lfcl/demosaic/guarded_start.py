@@ -16,8 +16,9 @@ start (docs/auto.md, "Periodic content"):
 
 * in the lenses whose epipolar lines carry one colour (:func:`one_colour_lenses`): with an odd pitch and an
   odd integer disparity every sample along a line has the same CFA colour, so neither the data term nor the
-  prior along the lines says anything about the line's two other colours, and admm-epi keeps whatever the
-  start put there. linear4d's guess breaks on lens-scale gratings; Malvar's is Malvar's own. The disparity must
+  prior along the lines says anything about the line's two other colours: the start fills them, and admm-epi's
+  in-lens cross block (lfcl/solvers/epi.py ``InLensCrossGradient``) ties them to the neighbouring lines'.
+  linear4d's guess breaks on lens-scale gratings; Malvar's is Malvar's own. The disparity must
   be known there (:func:`known_one_colour_lenses`): confident, or shared by most of the neighbourhood;
 * in regions whose disparity is an end of the search range and not confident, and whose micro-images are not
   flat within the noise (:func:`range_edge_lenses`): content beyond the range, or a repeating pattern the cost

@@ -1,16 +1,19 @@
 """ADMM with the prior along the epipolar lines (``admm-epi``) on an OpenCL device, and its float64 twin.
 
     min_x 1/2 ||W^(1/2) (A x - b)||^2 + lam ||D_epi(d, w) x||_1 + lam_fb ||D_epi(0, 1 - w) x||_1
-          + lam_xc ||D_epi(d, w) C x||_1
+          + lam_xc ||D_epi(d, w) C x||_1 + lam_xc ||D_epi(0, m) C x||_1
 
 ``A`` the CFA sampling (the data term stays exact: A on the true sensor samples), ``D_epi(d, w)``
 the confidence-weighted differences along each sample's epipolar line (lfcl/ops/epi.py), and the
 fall-back term ``D_epi(0, 1 - w) = (1 - w) D_uv``: (u, v) differences where the disparity is not
 trusted (occlusions, textureless or non-Lambertian lenses), 0 where the confidence is 1. The optional
 cross-channel term (``params.lam_xc > 0``) takes the same EPI differences of the colour differences
-``C x = (x_R - x_G, x_B - x_G)`` (lfcl/ops/crosschannel.py): colour fringes along the epipolar lines.
+``C x = (x_R - x_G, x_B - x_G)`` (lfcl/ops/crosschannel.py): colour fringes along the epipolar lines. In the
+lenses whose epipolar lines carry one CFA colour (``m`` = 1; an odd pitch at an odd whole disparity, where no sample
+along a line measures its two other colours) the cross term also takes the colour differences across the lines,
+within each micro-image (``D_epi(0, m) = m D_uv``, :class:`InLensCrossGradient`; docs/admm.md, "One-colour lines").
 
-Scaled-form ADMM over the stacked blocks ``K = [K_epi; K_fb; K_xc]``, each with its own threshold:
+Scaled-form ADMM over the stacked blocks ``K = [K_epi; K_xc; K_lens; K_fb]``, each with its own threshold:
 
     x <- (A^T W A + rho K^T K)^{-1} (A^T W b + rho K^T (z - u))   block-Jacobi PCG, warm-started
     z <- S_{lam_b / rho}(K_b x + u_b)                              per block
@@ -62,11 +65,14 @@ class EpiPrior:
     confidence: [S, T] in [0, 1], weighting the EPI differences (None: 1 everywhere).
     lam_fb:     weight of the fall-back term lam_fb ||(1 - w) D_uv x||_1 (0: none; it also
                 vanishes where the confidence is 1).
+    one_colour: [S, T] bool, the lenses whose epipolar lines carry one colour (:func:`one_colour_prior_lenses`),
+                where the cross-channel term also takes the (u, v) colour differences (None: none).
     """
 
     disparity: np.ndarray
     confidence: np.ndarray | None = None
     lam_fb: float = 0.0
+    one_colour: np.ndarray | None = None
 
     def __post_init__(self):
         if not (isinstance(self.lam_fb, (int, float)) and math.isfinite(self.lam_fb) and self.lam_fb >= 0):
@@ -77,6 +83,39 @@ class EpiPrior:
 
     def has_fallback(self, lenses) -> bool:
         return self.lam_fb > 0 and bool(np.any(self.maps(lenses)[1] < 1))
+
+    def one_colour_weights(self, lenses) -> np.ndarray | None:
+        """The in-lens cross block's lens weights m [S, T] float32 (None: no lens has one-colour lines)."""
+        if self.one_colour is None:
+            return None
+        m = np.asarray(self.one_colour)
+        if m.shape != tuple(lenses):
+            raise ValueError(f"one_colour must be a map of {lenses[0]}x{lenses[1]} lenses, got shape {m.shape}")
+        return m.astype(np.float32) if np.any(m) else None
+
+    def rows(self, h0: int, h1: int) -> EpiPrior:
+        """The prior of lens rows [h0, h1) (a band of :func:`_solve_bands`)."""
+        def cut(a):
+            return None if a is None else np.asarray(a)[h0:h1]
+        return dataclasses.replace(self, disparity=self.disparity[h0:h1], confidence=cut(self.confidence),
+                                   one_colour=cut(self.one_colour))
+
+
+#: Lenses whose disparity lies within this many lenses per view step of a one-colour disparity (an odd whole one at
+#: an odd pitch: lfcl.demosaic.guarded_start.one_colour_lenses) get admm-epi's in-lens cross block. Near such a
+#: disparity the lines' interpolation mixes in the other colours only weakly. The training captures pointed at 0.15;
+#: held out, the Lytro frame (all of it at d = 0.84-0.88) then lost up to 4 dB of mean image, so 0.1, checked on
+#: captures used for nothing before (docs/admm.md, "One-colour lines").
+ONE_COLOUR_PRIOR_WITHIN = 0.1
+
+
+def one_colour_prior_lenses(depth, pitch, within: float | None = None) -> np.ndarray:
+    """The lenses [S, T] (bool) that get the in-lens cross block: one-colour lines (``within``, None:
+    :data:`ONE_COLOUR_PRIOR_WITHIN`) whose disparity is known, as the start guard counts them
+    (lfcl.demosaic.guarded_start.known_one_colour_lenses). ``depth``: an ``lfcl.depth.DisparityMap``."""
+    from ..demosaic.guarded_start import known_one_colour_lenses
+
+    return known_one_colour_lenses(depth, pitch, ONE_COLOUR_PRIOR_WITHIN if within is None else float(within))
 
 
 #: The disparity's candidate spacing where no noise level chooses it (the parabola through the best candidate and its
@@ -206,7 +245,8 @@ def _check_params(params: AdmmParams):
         raise ValueError("x_update 'lens' needs the (u, v) prior; the EPI prior couples lenses (use 'cg' or 'auto')")
 
 
-def epi_solver_bytes(sensor_shape, fallback: bool, cross_channel: bool = False, extrapolation: bool = False) -> int:
+def epi_solver_bytes(sensor_shape, fallback: bool, cross_channel: bool = False, extrapolation: bool = False,
+                     one_colour: bool = False) -> int:
     """Device memory an EpiAdmmSolver.solve needs, with its start and mosaic (bytes)."""
     H, W = (int(n) for n in sensor_shape)
     planes = 3 * H * W
@@ -219,6 +259,8 @@ def epi_solver_bytes(sensor_shape, fallback: bool, cross_channel: bool = False, 
         floats += 3 * 4 * H * W + H * W
     if extrapolation:  # N x_k - N x_{k-1}
         floats += planes
+    if cross_channel and one_colour:  # the in-lens cross block: z, u [2, 2, H, W], C x [2, H, W], its rays (d, w)
+        floats += 2 * 4 * H * W + 2 * H * W + 2 * H * W
     return 4 * floats
 
 
@@ -283,6 +325,39 @@ class EpiCrossGradient:
         return self.epi.adjoint(self.colour.adjoint(z, self._buffer()), out, accumulate)
 
 
+class InLensCrossGradient:
+    """The in-lens cross block ``D_epi(0, m) C = m D_uv C`` on the device, ``[3, H, W]`` -> ``[2, 2, H, W]``: the
+    (u, v) differences of the colour differences, weighted per lens by ``m`` (1 where the epipolar lines carry one
+    colour, :class:`EpiPrior` ``one_colour``). There the lines measure one colour each, so the other two are tied to
+    the neighbouring lines' only across them. Computed as ``D_epi(0, m)`` (a 2-channel
+    :class:`~lfcl.ops.epi.EpiGradient`, whose taps at d = 0 stay in the lens) of ``C x``. Twins:
+    :func:`epi_cross_gradient_np`, :func:`epi_cross_adjoint_np` with disparity 0 and confidence m."""
+
+    def __init__(self, runtime, planes_shape, pitch):
+        _, H, W = planes_shape
+        self.planes_shape = tuple(planes_shape)
+        self.colour = ColourDifferences(runtime, self.planes_shape)
+        self.epi = EpiGradient(runtime, (2, H, W), pitch)
+        self.gradient_shape = self.epi.gradient_shape
+        self._differences = runtime.empty((2, H, W))  # C x, C^T's input
+
+    def set_weights(self, weights: np.ndarray):
+        """The lens weights m [S, T]."""
+        self.epi.set_maps(np.zeros_like(weights, dtype=np.float32), weights)
+
+    def diagonal(self, out, accumulate: bool = False):
+        """diag(D^T D) [H, W] of the (u, v) differences (times C^T C in the preconditioner's colour block)."""
+        return self.epi.diagonal(out, accumulate)
+
+    def forward(self, x, out=None):
+        """m D_uv C x."""
+        return self.epi.forward(self.colour.forward(x, self._differences), out)
+
+    def adjoint(self, z, out=None, accumulate: bool = False):
+        """C^T D_uv^T m z; with ``accumulate`` added into ``out``."""
+        return self.colour.adjoint(self.epi.adjoint(z, self._differences), out, accumulate)
+
+
 #: Every this many iterations EpiAdmmSolver.iterate recomputes the vectors it carries (EpiAdmmSolver.refresh). The
 #: carry's float32 round-off grows with the iterations: on a 12x12-lens plane (5 CG steps, carried throughout)
 #: 6e-6 of |rhs| after 6 iterations, 1.6e-4 after 50 and 1.3e-3 after 200, by then as large as the residual itself.
@@ -336,6 +411,7 @@ class EpiAdmmSolver:
         self.epi = EpiGradient(runtime, self.planes_shape, (self.U, self.V))
         self.fallback = EpiGradient(runtime, self.planes_shape, (self.U, self.V))  # d = 0, weights 1 - w
         self.cross: EpiCrossGradient | None = None  # D_epi C, built by the first prepare with lam_xc > 0
+        self.lens_cross: InLensCrossGradient | None = None  # m D_uv C, built by the first prepare that has m
         self.vectors = VectorOps(runtime)
         self.reduce = Reductions(runtime)
         self._rhs, self._x_prev = runtime.empty(self.planes_shape), runtime.empty(self.planes_shape)
@@ -368,9 +444,10 @@ class EpiAdmmSolver:
     def prepare(self, params: AdmmParams, prior: EpiPrior, lens_weights=None):
         """Upload the maps and weights, build diag(K^T K) and the blocks (op, lam) for ``params``.
 
-        The blocks run in the order EPI, cross-channel (lam_xc > 0), fall-back (where the confidence is
-        below 1): the cross block's ``K x`` comes from the EPI block's and its adjoint folds into the EPI
-        block's gather (:class:`EpiCrossGradient`), so those two share one ``D_epi`` and one ``D_epi^T``."""
+        The blocks run in the order EPI, cross-channel (lam_xc > 0), in-lens cross (lam_xc > 0 and lenses of
+        one-colour lines, :class:`InLensCrossGradient`), fall-back (where the confidence is below 1): the cross
+        block's ``K x`` comes from the EPI block's and its adjoint folds into the EPI block's gather
+        (:class:`EpiCrossGradient`), so those two share one ``D_epi`` and one ``D_epi^T``."""
         _check_params(params)
         self.set_lens_weights(lens_weights)
         disparity, confidence = prior.maps(self.lenses)
@@ -384,6 +461,13 @@ class EpiAdmmSolver:
                 self._cross_scratch = self.runtime.empty(self.cross.gradient_shape)
             self.vectors.copy(self._kdiag, self._xdiag)  # diag(D_epi^T D_epi); times C^T C in block_jacobi
             self.blocks.append((self.cross, params.lam_xc))
+            one_colour = prior.one_colour_weights(self.lenses)
+            if one_colour is not None:
+                if self.lens_cross is None:
+                    self.lens_cross = InLensCrossGradient(self.runtime, self.planes_shape, (self.U, self.V))
+                self.lens_cross.set_weights(one_colour)
+                self.lens_cross.diagonal(self._xdiag, accumulate=True)
+                self.blocks.append((self.lens_cross, params.lam_xc))
         if prior.has_fallback(self.lenses):
             self.fallback.set_maps(np.zeros_like(disparity), 1 - confidence)
             self.fallback.diagonal(self._kdiag, accumulate=True)
@@ -392,7 +476,9 @@ class EpiAdmmSolver:
             if op not in self._state:
                 self._state[op] = (self.runtime.empty(op.gradient_shape), self.runtime.empty(op.gradient_shape))
         self._states = [self._state[op] for op, _ in self.blocks]
-        self._scratches = [self._cross_scratch if op is self.cross else self._scratch for op, _ in self.blocks]
+        # the in-lens cross block's K x shares the cross block's scratch: each block's is used up before the next's
+        self._scratches = [self._cross_scratch if op in (self.cross, self.lens_cross) else self._scratch
+                           for op, _ in self.blocks]
 
     @property
     def _has_cross(self) -> bool:
@@ -428,8 +514,11 @@ class EpiAdmmSolver:
         for op, _ in self.blocks:
             if op is self.cross:
                 continue  # in the EPI block's mixed gradient
-            mixed = op is self.epi and self._has_cross
-            op.adjoint(op.forward(src, self._scratch, mixed=mixed), out, accumulate=written)
+            if op is self.lens_cross:
+                op.adjoint(op.forward(src, self._cross_scratch), out, accumulate=written)
+            else:
+                mixed = op is self.epi and self._has_cross
+                op.adjoint(op.forward(src, self._scratch, mixed=mixed), out, accumulate=written)
             written = True
         self._pixelwise("epi_normal_finish", out.data, src.data, self._weight_runs.data, np.float32(rho),
                         np.float32(EPI_PROXIMAL * rho), np.int32(self.height), np.int32(self.width), self._pattern,
@@ -600,6 +689,7 @@ def admm_epi_reference(b, pattern, pitch, params: AdmmParams, x0, prior: EpiPrio
     """The float64 twin of :class:`EpiAdmmSolver`: the same problem and updates through
     :func:`lfcl.solvers.reference.admm_operators`, with K the stacked sparse matrices."""
     _check_params(params)
+    prior_spec = prior
     b = np.asarray(b, dtype=np.float64)
     U, V = pitch
     H, W = b.shape
@@ -641,6 +731,21 @@ def admm_epi_reference(b, pattern, pitch, params: AdmmParams, x0, prior: EpiPrio
 
         prior, prior_adjoint = stacked_prior, stacked_adjoint
         prior_weights = np.concatenate([np.tile(prior_weights[0], 3), np.full(4 * H * W, params.lam_xc)])
+        one_colour = prior_spec.one_colour_weights(lenses)
+        if one_colour is not None:  # the in-lens cross block D_epi(0, m) C after the cross block
+            zero = np.zeros_like(disparity)
+            L = epi_matrix_np(zero, pitch, one_colour)
+            cross = cross + epi_diagonal_np(zero, pitch, matrix=L)
+            split2 = split + 4 * H * W
+
+            def lens_prior(v, outer=prior):
+                return np.concatenate([outer(v), epi_cross_gradient_np(v, zero, pitch, matrix=L).ravel()])
+
+            def lens_adjoint(z, outer=prior_adjoint):
+                return outer(z[:split2]) + epi_cross_adjoint_np(z[split2:].reshape(2, 2, H, W), zero, pitch, matrix=L)
+
+            prior, prior_adjoint = lens_prior, lens_adjoint
+            prior_weights = np.concatenate([prior_weights, np.full(4 * H * W, params.lam_xc)])
     blocks = epi_colour_blocks_np(data, kdiag, cross, params.rho, EPI_PROXIMAL * params.rho)
     return admm_operators(
         b, x0, dataclasses.replace(params, lam=1.0), w,
@@ -723,7 +828,9 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     depth_seconds = 0.0 if shared else depth_seconds
     # The confidence splits the prior between the epipolar lines and the fall-back: without a fall-back every ray
     # keeps its full weight (a low-confidence lens would otherwise be left with almost no prior).
-    prior = EpiPrior(depth.disparity, depth.confidence if lam_fb > 0 else None, lam_fb=float(lam_fb))
+    one_colour = one_colour_prior_lenses(depth, pitch) if params.cross_channel else None
+    prior = EpiPrior(depth.disparity, depth.confidence if lam_fb > 0 else None, lam_fb=float(lam_fb),
+                     one_colour=one_colour)
     U = int(pitch[0])
     S = H // U
     budget = int(max_memory) if max_memory is not None else epi_default_budget(runtime.device)
@@ -731,7 +838,8 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     halo = epi_halo(depth.disparity, pitch)
     bands = epi_bands(S, halo, epi_lens_rows_that_fit((U, W), fallback, budget, runtime.device.max_mem_alloc_size,
                                                       cross_channel=params.cross_channel,
-                                                      extrapolation=params.extrapolation > 0))
+                                                      extrapolation=params.extrapolation > 0,
+                                                      one_colour=one_colour is not None and bool(one_colour.any())))
     dark = lens_weights is not None and np.any(np.asarray(lens_weights) == 0)
     if len(bands) == 1:
         solver = EpiAdmmSolver(runtime, (H, W), pattern, pitch, origin)
@@ -749,6 +857,9 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     parameters = {
         "lam_fb": float(lam_fb),
         "fallback_block": fallback,
+        # lenses whose lines carry one colour: the cross term there also across the lines (InLensCrossGradient)
+        "one_colour_cross_lenses": 0 if one_colour is None else int(one_colour.sum()),
+        "one_colour_cross_within": ONE_COLOUR_PRIOR_WITHIN,
         "disparity": {
             "units": "lenses per view step", "min": float(d.min()), "max": float(d.max()),
             "mean": float(d.mean()), "median": float(np.median(d)), "std": float(d.std()),
@@ -801,10 +912,10 @@ def epi_halo(disparity, pitch) -> int:
 
 
 def epi_lens_rows_that_fit(lens_row_shape, fallback: bool, budget: int, largest_buffer: int,
-                           cross_channel: bool = False, extrapolation: bool = False) -> int:
+                           cross_channel: bool = False, extrapolation: bool = False, one_colour: bool = False) -> int:
     """The most lens rows whose EpiAdmmSolver fits ``budget`` bytes, with every buffer under ``largest_buffer``."""
     U, W = lens_row_shape
-    per_row = epi_solver_bytes((U, W), fallback, cross_channel, extrapolation)
+    per_row = epi_solver_bytes((U, W), fallback, cross_channel, extrapolation, one_colour)
     return max(0, min(budget // per_row, largest_buffer // (4 * 6 * U * W)))
 
 
@@ -836,8 +947,7 @@ def _solve_bands(runtime, b_host, x0_host, pattern, pitch, origin, params, prior
         if solver is None or solver.height != (h1 - h0) * U or (solver.origin[0] - band_origin[0]) % 2:
             solver = None  # the previous band's buffers go before the next band's come
             solver = EpiAdmmSolver(runtime, ((h1 - h0) * U, b_host.shape[1]), pattern, pitch, band_origin)
-        band_prior = dataclasses.replace(prior, disparity=prior.disparity[h0:h1],
-                                         confidence=None if prior.confidence is None else prior.confidence[h0:h1])
+        band_prior = prior.rows(h0, h1)
         run = solver.solve(runtime.to_device(b_host[rows]), runtime.to_device(x0_host[:, rows]), params, band_prior,
                            callback=callback, lens_weights=lens_weights)
         planes[:, s0 * U:s1 * U] = run.x.get()[:, (s0 - h0) * U:(s1 - h0) * U]
