@@ -1036,6 +1036,32 @@ def test_admm_epi_on_a_grating_at_an_odd_disparity_beats_malvar(monkeypatch):
     assert without["psnr_center"] < result["psnr_center"] - 3.0
 
 
+def test_admm_epi_from_the_12_lux_row_takes_malvars_colour_in_its_start(monkeypatch):
+    """A grey period-2.5 grating at d = -1.5, 12 lux: linear4d misreads its colour over the whole frame (no lens
+    stands out for the guard), and admm-epi from linear4d's colour differences ended 6.7 dB below Malvar's mean
+    image. The schedule's rows from 12 lux up move the start's colour differences towards Malvar's; the 2-lux row
+    does not. Both views above Malvar with it, the mean image below without."""
+    import lfcl.solvers.epi as epi
+    from lfcl.evaluation.evaluate import run_method, simulation_capture
+    from lfcl.sim import simulate
+    from lfcl.sim.periodic import SineGrating
+    from lfcl.sim.planes import Plane
+
+    rows = {row.sigma: row.malvar_colour for row in epi.EPI_SCHEDULE}
+    assert rows[4.6e-3] > 0 and rows[9.24e-3] > 0 and rows[1.03e-3] == rows[1.92e-3] == 0
+    capture = simulation_capture(simulate(planes=[Plane("g", -1.5, SineGrating(2.5, 0.7))], lenses=(24, 24), lux=12,
+                                          seed=1))
+    malvar = run_method(capture, "malvar")
+    result = run_method(capture, "admm-epi")
+    assert result["parameters"]["start_guard"]["malvar_colour"] == rows[4.6e-3]
+    assert result["psnr_center"] > malvar["psnr_center"] and result["psnr_mean"] > malvar["psnr_mean"]
+    monkeypatch.setattr(epi, "EPI_SCHEDULE", tuple(dataclasses.replace(row, malvar_colour=0.0)
+                                                   for row in epi.EPI_SCHEDULE))
+    without = run_method(capture, "admm-epi")
+    assert without["parameters"]["start_guard"]["malvar_colour"] == 0.0
+    assert without["psnr_mean"] < malvar["psnr_mean"] - 1.0
+
+
 def test_epi_params_take_the_x_update_of_the_nearer_row(monkeypatch):
     import lfcl.solvers.epi as epi
     from lfcl.solvers.params import AdmmParams

@@ -134,3 +134,51 @@ def test_device_lens_mean_guard_matches_the_reference(runtime, rng, pitch, lense
         assert (expected_replaced[~filled] == 0).all()
         per_pixel = np.repeat(np.repeat(filled, pitch[0], axis=0), pitch[1], axis=1)
         np.testing.assert_array_equal(expected[:, ~per_pixel], x[:, ~per_pixel])
+
+
+@pytest.mark.parametrize("weight", [1.0, 0.5, 0.0])
+def test_colour_differences_from_keeps_the_level_and_takes_the_colour(runtime, rng, weight):
+    """The start's level (the mean of its three colours) stays; its colour differences move by ``weight`` towards the
+    other's: by the definition, the twin, and the device against the twin."""
+    from lfcl.ops.lensguard import colour_differences_from_np
+
+    x = rng.random((3, 18, 27))
+    m = rng.random((3, 18, 27))
+    got = colour_differences_from_np(x, m, weight)
+    np.testing.assert_allclose(got.mean(axis=0), x.mean(axis=0), atol=1e-12)  # the level kept
+    for a, b in ((0, 1), (2, 1)):
+        np.testing.assert_allclose(got[a] - got[b], (1 - weight) * (x[a] - x[b]) + weight * (m[a] - m[b]), atol=1e-12)
+    x32, m32 = x.astype(np.float32), m.astype(np.float32)
+    guard = LensGuard(runtime, (18, 27), (9, 9))
+    device = guard.colour_differences_from(runtime.to_device(x32), runtime.to_device(m32), weight).get()
+    np.testing.assert_allclose(device, colour_differences_from_np(x32, m32, weight), atol=1e-6)
+
+
+def test_guarded_start_takes_malvars_colour_differences_when_asked(runtime, rng):
+    """``malvar_colour`` 1: the guarded start's level stays and its colour differences are Malvar's; 0.5: half way
+    (and the report says which); a share outside [0, 1] is refused."""
+    from lfcl.demosaic.guarded_start import guarded_start
+    from lfcl.noise.model import NoiseEstimate
+
+    H, W = 27, 36
+    mosaic = (0.3 + 0.01 * rng.standard_normal((H, W))).astype(np.float32)
+    linear4d = (0.3 + 0.02 * rng.standard_normal((3, H, W))).astype(np.float32)
+    malvar = (0.3 + 0.02 * rng.standard_normal((3, H, W))).astype(np.float32)
+    noise = NoiseEstimate(gain=1e-4, floor=1e-5, sigma=0.005, source="test")
+
+    def start(share):
+        return guarded_start(runtime, runtime.to_device(linear4d.copy()), runtime.to_device(malvar),
+                             runtime.to_device(mosaic), (9, 9), noise, malvar_colour=share)
+
+    (plain, report), (full, full_report), (half, _) = start(0.0), start(1.0), start(0.5)
+    plain, full, half = plain.get(), full.get(), half.get()
+    assert report["malvar_colour"] == 0.0 and full_report["malvar_colour"] == 1.0
+    for got in (full, half):
+        np.testing.assert_allclose(got.mean(axis=0), plain.mean(axis=0), atol=1e-6)
+    for a, b in ((0, 1), (2, 1)):
+        np.testing.assert_allclose(full[a] - full[b], malvar[a] - malvar[b], atol=1e-6)
+        np.testing.assert_allclose(half[a] - half[b], 0.5 * (plain[a] - plain[b] + malvar[a] - malvar[b]), atol=1e-6)
+    assert np.abs((plain[0] - plain[1]) - (malvar[0] - malvar[1])).max() > 0.01  # it did change them
+    for bad in (-0.1, 1.5, "malvar"):
+        with pytest.raises(ValueError, match="malvar_colour must be a number"):
+            start(bad)

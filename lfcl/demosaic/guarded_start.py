@@ -125,14 +125,21 @@ def range_edge_lenses(depth, flat: np.ndarray | None = None, majority: int | Non
 
 def guarded_start(runtime, linear4d_start, malvar_start, mosaic, pitch, noise: NoiseEstimate,
                   factor: float = GUARD_FACTOR, depth=None, one_colour_within: float | None = None,
-                  flat: np.ndarray | None = None):
+                  flat: np.ndarray | None = None, malvar_colour: float = 0.0):
     """The guarded start, written into the device ``linear4d_start`` [3, H, W] (which is returned),
     and what it did (``factor``, the median D, ``lenses_from_malvar`` of ``lenses``). With ``depth``, admm-epi's
     ``lfcl.depth.DisparityMap``, the lenses of one-colour lines whose disparity is known
     (:func:`known_one_colour_lenses`, ``one_colour_within``; None: :data:`ONE_COLOUR_WITHIN`) and their neighbours
     take Malvar's too, and so do the lenses of :func:`range_edge_lenses` (with ``flat``, the lenses flat within the
     noise) and theirs (``one_colour_lenses``, ``one_colour_within``, ``confident``, ``one_colour_majority``,
-    ``range_edge_lenses``)."""
+    ``range_edge_lenses``). ``malvar_colour`` w in [0, 1]: afterwards every pixel keeps the start's level (the mean
+    of its three colours) and moves its colour differences by the share w towards Malvar's (0: none, 1: Malvar's;
+    admm-epi's schedule sets it by light level, lfcl/solvers/epi.py ``EpiSetting.malvar_colour``): linear4d reads the
+    neighbouring lenses at the same (u, v), and on lens-scale texture off the focal plane it misreads colour over the
+    whole frame, where the outlier test finds no lens and admm-epi corrects it only slowly (docs/admm.md, "The start's
+    colour differences")."""
+    if not (isinstance(malvar_colour, (int, float)) and 0.0 <= malvar_colour <= 1.0):
+        raise ValueError(f"malvar_colour must be a number in [0, 1], got {malvar_colour!r}")
     guard = LensGuard(runtime, mosaic.shape, pitch)
     d = guard.disagreement(linear4d_start, malvar_start, mosaic, noise.gain, noise.floor)
     outliers = disagreement_outliers(d, factor)
@@ -147,4 +154,7 @@ def guarded_start(runtime, linear4d_start, malvar_start, mosaic, pitch, noise: N
     chosen = with_neighbours(outliers)
     if chosen.any():
         guard.take(linear4d_start, malvar_start, chosen)
-    return linear4d_start, {**report, "lenses_from_malvar": int(chosen.sum()), "lenses": int(chosen.size)}
+    if malvar_colour > 0:
+        guard.colour_differences_from(linear4d_start, malvar_start, malvar_colour)
+    return linear4d_start, {**report, "lenses_from_malvar": int(chosen.sum()), "lenses": int(chosen.size),
+                            "malvar_colour": float(malvar_colour)}

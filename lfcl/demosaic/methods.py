@@ -345,7 +345,13 @@ def solve_aligned(mosaic: np.ndarray, pattern: str, pitch, method: str, *, origi
                 flat = flat_lenses_on_device(runtime, b, mosaic, pattern, pitch, noise, origin=origin,
                                              lens_weights=lens_weights).flat
             malvar = Malvar(runtime, mosaic.shape, pattern, origin).forward(b)
-            x0, guard = guarded_start(runtime, x0, malvar, b, pitch, noise, depth=depth, flat=flat)
+            colour = 0.0
+            if method == "admm-epi":  # its schedule's colour differences (lfcl/solvers/epi.py EpiSetting)
+                from ..solvers.epi import epi_setting
+
+                colour = epi_setting(max(float(noise.sigma), 1e-6)).malvar_colour
+            x0, guard = guarded_start(runtime, x0, malvar, b, pitch, noise, depth=depth, flat=flat,
+                                      malvar_colour=colour)
             del malvar
     else:  # lens-malvar: Malvar bounded to each lens, so that no filter reads a neighbouring micro-image
         x0 = Malvar(runtime, mosaic.shape, pattern, origin, lens=pitch if start == "lens-malvar" else None).forward(b)

@@ -43,6 +43,22 @@ __kernel void take_lenses(__global float *x, __global const float *from, __globa
         x[c * plane + i] = from[c * plane + i];
 }
 
+// colour_differences_from, one work-item per pixel, global size (width, height): x keeps its level (the mean of
+// its three colours) and moves its colour differences by the share w towards those of m,
+// x_c += w (m_c + level - x_c), level = (x_0 + x_1 + x_2 - m_0 - m_1 - m_2) / 3 (w = 1: m's colour differences).
+__kernel void colour_differences_from(__global float *x, __global const float *m, const int height, const int width,
+                                      const float w)
+{
+    const int col = get_global_id(0), row = get_global_id(1);
+    if (col >= width || row >= height) return;
+    const size_t plane = (size_t)height * width, i = (size_t)row * width + col;
+    const float level = ((x[i] - m[i]) + (x[plane + i] - m[plane + i]) + (x[2 * plane + i] - m[2 * plane + i])) / 3.0f;
+    for (int c = 0; c < 3; ++c) {
+        const float xc = x[c * plane + i];
+        x[c * plane + i] = fma(w, m[c * plane + i] + level - xc, xc);
+    }
+}
+
 // guard_lens_means, one work-item per lens, global size (T, S): the safety net's lens-mean guard
 // (lfcl/demosaic/safety_net.py). For each colour c, dx = mean_uv x_c - mean_uv m_c is soft-thresholded at
 // k sd, sd = sqrt(var(level) / (U V / 4)) (the noise of a mean of a quarter of the lens's samples,

@@ -8,6 +8,7 @@ For lens (s, t), two starts a, b [3, H, W] and the raw mosaic x::
 
 ``lens_disagreement_np`` and ``take_lenses_np`` are the float64 references; ``LensGuard`` runs
 both on the device (lfcl/kernels/lensguard.cl), so only the [S, T] array of D comes back to the host.
+``colour_differences_from_np`` (the start's colour differences taken from another, its level kept) too.
 
 Example::
 
@@ -48,6 +49,14 @@ def take_lenses_np(x: np.ndarray, source: np.ndarray, chosen: np.ndarray, pitch)
     U, V = pitch
     per_pixel = np.repeat(np.repeat(np.asarray(chosen, bool), U, axis=0), V, axis=1)[None]
     return np.where(per_pixel, source, x)
+
+
+def colour_differences_from_np(x: np.ndarray, m: np.ndarray, weight: float = 1.0) -> np.ndarray:
+    """``x`` [3, H, W] with its level (the mean of its three colours) kept and its colour differences moved by the
+    share ``weight`` towards those of ``m``: ``x_c + weight (m_c + mean_c(x - m) - x_c)`` (lfcl/kernels/lensguard.cl
+    ``colour_differences_from``), float64. ``weight`` 1: m's colour differences."""
+    x, m = np.asarray(x, np.float64), np.asarray(m, np.float64)
+    return x + float(weight) * (m + (x - m).mean(axis=0)[None] - x)
 
 
 def guard_lens_means_np(x: np.ndarray, malvar: np.ndarray, mosaic: np.ndarray, pitch, *, gain: float,
@@ -136,6 +145,16 @@ class LensGuard:
                             np.float32(gain), np.float32(floor), np.float32(k), j32,
                             defines=grid_defines(self.pitch, 0))
         return self._out.get().astype(np.float64)
+
+    def colour_differences_from(self, x, source, weight: float = 1.0):
+        """:func:`colour_differences_from_np` in place on the device ``x`` [3, H, W]; returns x."""
+        planes = (3, self.height, self.width)
+        check_device_array(x, planes, "x")
+        check_device_array(source, planes, "source")
+        self.runtime.launch("lensguard", "colour_differences_from", (self.width, self.height), x.data, source.data,
+                            np.int32(self.height), np.int32(self.width), np.float32(weight),
+                            defines=grid_defines(self.pitch, 0))
+        return x
 
     def take(self, x, source, chosen: np.ndarray):
         """Overwrite the lenses ``chosen`` [S, T] (host bool) of the device ``x`` with ``source``'s; returns x."""

@@ -137,6 +137,7 @@ class EpiSetting:
     depth_step: float = DEPTH_STEP  # the disparity's candidate spacing (lenses per view step; epi_depth_options)
     cg_steps: int = 5  # CG steps per x-update
     extrapolation: float = 0.0  # CG's warm start x_k + extrapolation (x_k - x_{k-1}) (AdmmParams.extrapolation)
+    malvar_colour: float = 0.0  # the guarded start's colour differences moved this share towards Malvar's (guarded_start)
 
 
 #: admm-epi's defaults by noise level, fitted by research/fit_epi.py on training seeds with the noise model
@@ -151,15 +152,19 @@ class EpiSetting:
 #: (research/epi_extrapolation.py; docs/admm.md, "The extrapolated warm start"); the 0.5-lux row keeps 5 from x_k,
 #: where the extrapolation needed more iterations and cost the mean image up to 0.4 dB. It restarts after an
 #: iteration that changed x more than the one before (lfcl/solvers/params.py extrapolate).
+#: From the 12-lux row up the guarded start's colour differences move part of the way to Malvar's (``malvar_colour``:
+#: 0.75 at 12 lux, all of it at 50; docs/admm.md, "The start's colour differences"): lens-scale gratings off the focal
+#: plane fell up to 8.2 dB below Malvar from linear4d's; the rows below keep linear4d's, which the training captures
+#: preferred there.
 EPI_SCHEDULE = (  # the median sigma of the training captures at 0.5, 2, 12 and 50 lux
     EpiSetting(sigma=1.03e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.02, iterations=20, start="guarded",
                xc_per_lam=1.0, depth_step=0.2),
     EpiSetting(sigma=1.92e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.05, iterations=40, start="guarded",
                xc_per_lam=1.0, depth_step=0.2, cg_steps=3, extrapolation=0.8),
     EpiSetting(sigma=4.6e-3, lam_per_sigma=0.2, fb_per_lam=0.0, change_per_sigma=0.05, iterations=40, start="guarded",
-               xc_per_lam=1.0, depth_step=0.2, cg_steps=3, extrapolation=0.8),
+               xc_per_lam=1.0, depth_step=0.2, cg_steps=3, extrapolation=0.8, malvar_colour=0.75),
     EpiSetting(sigma=9.24e-3, lam_per_sigma=0.4, fb_per_lam=0.0, change_per_sigma=0.05, iterations=20, start="guarded",
-               xc_per_lam=1.0, depth_step=0.1, cg_steps=3, extrapolation=0.8),
+               xc_per_lam=1.0, depth_step=0.1, cg_steps=3, extrapolation=0.8, malvar_colour=1.0),
 )
 
 #: lfcl.depth.estimate_disparity's options for admm-epi (its own defaults otherwise, the half apertures among them):
@@ -203,7 +208,8 @@ def epi_setting(sigma: float, schedule=None) -> EpiSetting:
                       start=a.start if t < 0.5 else b.start, xc_per_lam=(1 - t) * a.xc_per_lam + t * b.xc_per_lam,
                       depth_step=a.depth_step if t < 0.5 else b.depth_step,
                       cg_steps=a.cg_steps if t < 0.5 else b.cg_steps,
-                      extrapolation=a.extrapolation if t < 0.5 else b.extrapolation)
+                      extrapolation=a.extrapolation if t < 0.5 else b.extrapolation,
+                      malvar_colour=a.malvar_colour if t < 0.5 else b.malvar_colour)
 
 
 def epi_start(sigma: float, pitch) -> tuple[str, str | None]:
