@@ -687,6 +687,29 @@ def test_admm_epi_in_bands_matches_the_whole_sensor(runtime, rng):
         demosaic_grid(b, "GRBG", grid, "admm-epi", noise=noise, iterations=2, max_memory=epi_solver_bytes((U, T * V), True))
 
 
+def test_admm_epi_in_bands_with_the_in_lens_cross_block_matches_the_whole_sensor(runtime, rng):
+    """A plane at d = 1 (every lens's lines one colour): the bands cut the block's lens map with the others and count
+    its memory, and give the whole sensor's answer up to the halo's cut-off."""
+    from lfcl.demosaic.driver import demosaic_grid
+    from lfcl.depth import DisparityMap
+    from lfcl.grid.model import AlignedGrid
+    from lfcl.noise.model import NoiseEstimate
+    from lfcl.solvers.epi import epi_solver_bytes
+
+    S, T, U, V = 30, 6, 9, 9
+    b, _, _ = plane_scene_mosaic(rng, S, T, U, V, disparity=1.0, noise=0.01)
+    depth = DisparityMap(np.ones((S, T), np.float32), np.ones((S, T), np.float32), 2.0, 0.1, {}, {}, {})
+    noise = NoiseEstimate(gain=0.0, floor=1e-4, sigma=0.01, source="test")
+    grid = AlignedGrid((U, V))
+    options = dict(noise=noise, iterations=6, safety_net=False, disparity=depth, start="malvar")
+    whole = demosaic_grid(b, "GRBG", grid, "admm-epi", **options)
+    assert whole.parameters["one_colour_cross_lenses"] == S * T and "bands" not in whole.parameters
+    budget = epi_solver_bytes((22 * U, T * V), False, cross_channel=True, one_colour=True)  # 7 lens rows of halo
+    banded = demosaic_grid(b, "GRBG", grid, "admm-epi", max_memory=budget, **options)
+    assert len(banded.parameters["bands"]["lens_rows"]) >= 3
+    np.testing.assert_allclose(banded.planes, whole.planes, rtol=0, atol=1e-3)
+
+
 @pytest.mark.parametrize("S, T, U, V", [(7, 9, 9, 9), (5, 6, 4, 5), (3, 4, 1, 5), (4, 3, 3, 1), (1, 1, 1, 1)])
 def test_ray_maps_and_tap_spans_on_the_device_match_numpy(runtime, rng, S, T, U, V):
     """The per-sample maps and the per-lens tap spans that set_maps builds on the device, against their twins,
