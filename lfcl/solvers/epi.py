@@ -109,6 +109,34 @@ class EpiPrior:
 ONE_COLOUR_PRIOR_WITHIN = 0.1
 
 
+#: In those lenses the prior also keeps each colour smooth across the micro-image: the fall-back term, with the lines'
+#: weight w lowered to 1 - ONE_COLOUR_FALLBACK_SHARE there (1 elsewhere, so no other lens gets it) and, where no
+#: fall-back runs otherwise, lam_fb = ONE_COLOUR_FB_PER_LAM * lam. The in-lens cross block alone makes the two
+#: colours a line does not measure the measured one plus colour differences constant across the micro-image: right
+#: on grey content, wrong where the hue changes at the lens scale (a coloured grating of 5.8 lenses at d = 1.03 fell
+#: 4.9 dB below Malvar's centre view at 12 lux). As in a Bayer demosaic, each colour smooth lets the colour differences
+#: follow the content. Fitted on training captures (the gratings family's seeds 1-2, grey gratings at noise seed 1,
+#: charts, deadleaves, finetexture, periodic): the best worst case (docs/admm.md, "Each colour's own share where the
+#: hue changes").
+ONE_COLOUR_FALLBACK_SHARE = 0.2
+ONE_COLOUR_FB_PER_LAM = 2.5
+
+
+def epi_prior(depth, pitch, lam: float, lam_fb: float, cross_channel: bool) -> EpiPrior:
+    """admm-epi's prior from the disparity map ``depth`` (an ``lfcl.depth.DisparityMap``): the lines weighted by the
+    confidence where a fall-back runs (``lam_fb`` > 0; without one every ray keeps its full weight, since a
+    low-confidence lens would otherwise be left with almost no prior), and with the cross-channel block
+    (``cross_channel``) the in-lens block and its own fall-back share in the lenses of :func:`one_colour_prior_lenses`
+    (:data:`ONE_COLOUR_FALLBACK_SHARE`, :data:`ONE_COLOUR_FB_PER_LAM` times ``lam``)."""
+    confidence = np.asarray(depth.confidence, np.float32) if lam_fb > 0 else None
+    one_colour = one_colour_prior_lenses(depth, pitch) if cross_channel else None
+    if one_colour is not None and one_colour.any() and ONE_COLOUR_FALLBACK_SHARE > 0:
+        lines = np.where(one_colour, np.float32(1.0 - ONE_COLOUR_FALLBACK_SHARE), np.float32(1.0))
+        confidence = lines if confidence is None else confidence * lines
+        lam_fb = lam_fb if lam_fb > 0 else ONE_COLOUR_FB_PER_LAM * float(lam)
+    return EpiPrior(depth.disparity, confidence, lam_fb=float(lam_fb), one_colour=one_colour)
+
+
 def one_colour_prior_lenses(depth, pitch, within: float | None = None) -> np.ndarray:
     """The lenses [S, T] (bool) that get the in-lens cross block: one-colour lines (``within``, None:
     :data:`ONE_COLOUR_PRIOR_WITHIN`) whose disparity is known, as the start guard counts them
@@ -832,11 +860,8 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
     else:
         depth, depth_seconds = epi_disparity(raw_mosaic, pattern, pitch, origin, noise, device, depth_options)
     depth_seconds = 0.0 if shared else depth_seconds
-    # The confidence splits the prior between the epipolar lines and the fall-back: without a fall-back every ray
-    # keeps its full weight (a low-confidence lens would otherwise be left with almost no prior).
-    one_colour = one_colour_prior_lenses(depth, pitch) if params.cross_channel else None
-    prior = EpiPrior(depth.disparity, depth.confidence if lam_fb > 0 else None, lam_fb=float(lam_fb),
-                     one_colour=one_colour)
+    prior = epi_prior(depth, pitch, params.lam, lam_fb, params.cross_channel)
+    one_colour = prior.one_colour
     U = int(pitch[0])
     S = H // U
     budget = int(max_memory) if max_memory is not None else epi_default_budget(runtime.device)
@@ -861,8 +886,9 @@ def demosaic_epi(runtime, raw_mosaic, b, x0, pattern, pitch, origin, params: Adm
         raise FloatingPointError("admm-epi produced NaN/Inf values; try a smaller lambda or rho")
     d, w = depth.disparity, depth.confidence
     parameters = {
-        "lam_fb": float(lam_fb),
+        "lam_fb": float(prior.lam_fb),
         "fallback_block": fallback,
+        "one_colour_fallback_share": ONE_COLOUR_FALLBACK_SHARE,
         # lenses whose lines carry one colour: the cross term there also across the lines (InLensCrossGradient)
         "one_colour_cross_lenses": 0 if one_colour is None else int(one_colour.sum()),
         "one_colour_cross_within": ONE_COLOUR_PRIOR_WITHIN,
