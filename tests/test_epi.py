@@ -124,12 +124,18 @@ def test_a_scene_on_its_disparity_plane_has_no_differences():
     assert along < 0.05 * across
 
 
+@pytest.mark.parametrize("in_lens", [False, True], ids=["lines", "in-lens"])
 @pytest.mark.parametrize("geometry", [*GEOMETRIES, WIDE], ids=str)
-def test_device_matches_numpy(runtime, rng, geometry):
+def test_device_matches_numpy(runtime, rng, geometry, in_lens):
+    """Every disparity 0 (``in_lens``: the fall-back and in-lens blocks, some lenses weighted 0) builds the kernels
+    as in-lens stencils (epi.cl EPI_IN_LENS); both against the twin."""
     C, S, T, U, V = geometry
     x = rng.standard_normal((C, S * U, T * V)).astype(np.float32)
     z = rng.standard_normal((2, *x.shape)).astype(np.float32)
     disparity, confidence = maps(rng, S, T, spread=2.5)
+    if in_lens:
+        disparity[:] = 0.0
+        confidence[rng.uniform(size=confidence.shape) < 0.3] = 0.0
     op = EpiGradient(runtime, x.shape, (U, V))
     op.set_maps(disparity, confidence)
     M = epi_matrix_np(disparity, (U, V), confidence)
@@ -153,6 +159,25 @@ def test_device_matches_numpy(runtime, rng, geometry):
             op.forward(runtime.to_device(x), mixed=True)
 
 
+def test_in_lens_stencils_give_the_general_kernels_numbers(runtime, rng):
+    """At d = 0 everywhere the in-lens build (EPI_IN_LENS) and the general gathers compute the same operator: the
+    general kernels' Catmull-Rom weight is exactly 1 on the own lens there."""
+    C, S, T, U, V = WIDE
+    x = runtime.to_device(rng.standard_normal((C, S * U, T * V)).astype(np.float32))
+    z = runtime.to_device(rng.standard_normal((2, C, S * U, T * V)).astype(np.float32))
+    confidence = rng.uniform(0, 1, (S, T)).astype(np.float32)
+    op = EpiGradient(runtime, x.shape, (U, V))
+    op.set_maps(np.zeros((S, T), np.float32), confidence)
+    assert ("EPI_IN_LENS", 1) in op._defines
+    stencil = [op.forward(x).get(), op.forward(x, mixed=True).get(), op.adjoint(z).get(), op.diagonal().get()]
+    op._defines = op._grid_defines  # the same maps through the general kernels
+    general = [op.forward(x).get(), op.forward(x, mixed=True).get(), op.adjoint(z).get(), op.diagonal().get()]
+    for got, expected in zip(stencil, general):
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-6)
+    op.set_maps(np.full((S, T), 0.5, np.float32), confidence)  # any other disparity: the general build
+    assert op._defines == op._grid_defines
+
+
 def test_mixed_gradient_is_the_epi_and_cross_blocks_gram(rng):
     """D^T (I + C^T C) D x = D^T D x + (D C)^T (D C) x: what the solver's normal operator relies on."""
     from lfcl.solvers.epi import epi_cross_adjoint_np, epi_cross_gradient_np
@@ -167,11 +192,14 @@ def test_mixed_gradient_is_the_epi_and_cross_blocks_gram(rng):
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12)
 
 
-def test_adjoint_dot_test(runtime, rng):
+@pytest.mark.parametrize("in_lens", [False, True], ids=["lines", "in-lens"])
+def test_adjoint_dot_test(runtime, rng, in_lens):
     C, S, T, U, V = 3, 7, 6, 9, 9
     x = rng.standard_normal((C, S * U, T * V)).astype(np.float32)
     y = rng.standard_normal((2, *x.shape)).astype(np.float32)
     disparity, confidence = maps(rng, S, T, spread=3.0)
+    if in_lens:  # the in-lens stencils (epi.cl EPI_IN_LENS)
+        disparity[:] = 0.0
     op = EpiGradient(runtime, x.shape, (U, V))
     op.set_maps(disparity, confidence)
     dx = op.forward(runtime.to_device(x)).get().astype(np.float64)

@@ -117,6 +117,75 @@ inline int2 run_at(int height)
     return (int2)(16 * (first + at % width), (r % S) * PITCH_U + r / S);
 }
 
+// The adjoint's start on one run: acc holds out's values (accumulate) or 0 for its n channels, and w_u, w_v the
+// sample's own rows' weights (its ray's w where it has a next sample in u, in v), which it takes with a minus sign.
+inline void adjoint_start(float16 *acc, __global const float *x, __global const float *rays, size_t plane, size_t base,
+                          int col0, int width, int n, int accumulate, int u1, int16 v_pos, float16 *w_u, float16 *w_v)
+{
+    for (int c = 0; c < n; ++c) acc[c] = accumulate ? load_row(x + c * plane + base, col0, 0, width) : (float16)0.0f;
+    const float16 w_own = load_row(rays + plane + base, col0, 0, width);
+    *w_u = u1 < PITCH_U - 1 ? w_own : (float16)0.0f;
+    *w_v = select((float16)0.0f, w_own, v_pos < PITCH_V - 1);
+}
+
+// With EPI_IN_LENS (every disparity 0: the fall-back block and the in-lens cross block, lfcl/ops/epi.py
+// EpiGradient.set_maps) each ray's neighbour is the next sample of its own lens, so the same two kernels are plain
+// stencils: no taps, no offsets, no gathers over lens rows. The general kernels at d = 0 give the same numbers (the
+// Catmull-Rom weight there is exactly 1 on the own lens and 0 elsewhere); these read a third of the rows.
+#ifdef EPI_IN_LENS
+__kernel void epi_forward(__global const float *x, __global float *z, __global const float *rays,
+                          __global const int *offsets, const int height, const int width, const int channels,
+                          const int mix)
+{
+    const int col0 = 16 * get_global_id(0), row = get_global_id(1);
+    if (col0 >= width || row >= height) return;
+    const size_t plane = (size_t)height * width, base = (size_t)row * width;
+    const int16 has_next = lane_columns(col0) % PITCH_V < PITCH_V - 1;
+    const float16 w = load_row(rays + plane + base, col0, 0, width);
+    float16 own[MAX_CHANNELS], acc[MAX_CHANNELS];
+    for (int c = 0; c < channels; ++c) own[c] = load_row(x + c * plane + base, col0, 0, width);
+    // u-block: the neighbour (s, t, u + 1, v), the next row
+    for (int c = 0; c < channels; ++c) acc[c] = (float16)0.0f;
+    if (row % PITCH_U < PITCH_U - 1) {
+        for (int c = 0; c < channels; ++c) acc[c] = w * (load_row(x + c * plane + base + width, col0, 0, width) - own[c]);
+        if (mix) colour_mix(acc);
+    }
+    for (int c = 0; c < channels; ++c) store_row(acc[c], z + c * plane + base, col0, width);
+    // v-block: the neighbour (s, t, u, v + 1), the next column
+    for (int c = 0; c < channels; ++c)
+        acc[c] = select((float16)0.0f, w * (load_row(x + c * plane + base, col0, 1, width) - own[c]), has_next);
+    if (mix) colour_mix(acc);
+    for (int c = 0; c < channels; ++c) store_row(acc[c], z + (channels + c) * plane + base, col0, width);
+}
+
+__kernel void epi_adjoint(__global const float *z, __global float *x, __global const float *rays,
+                          __global const int *offsets, const int height, const int width, const int channels,
+                          const int accumulate, const int squared)
+{
+    const int col0 = 16 * get_global_id(0), row = get_global_id(1);
+    if (col0 >= width || row >= height) return;
+    const size_t plane = (size_t)height * width, base = (size_t)row * width;
+    const int n = squared ? 1 : channels, u1 = row % PITCH_U;
+    __global const float *zu = z, *zv = z + (size_t)channels * plane;
+    const int16 v_pos = lane_columns(col0) % PITCH_V;
+    float16 acc[MAX_CHANNELS], w_u, w_v;
+    adjoint_start(acc, x, rays, plane, base, col0, width, n, accumulate, u1, v_pos, &w_u, &w_v);
+    // the rays whose neighbour it is: the previous row's (u > 0) and the previous column's (v > 0), +w each
+    const float16 c_u = u1 > 0 ? load_row(rays + plane + base - width, col0, 0, width) : (float16)0.0f;
+    const float16 c_v = select((float16)0.0f, load_row(rays + plane + base, col0, -1, width), v_pos > 0);
+    if (squared) {
+        acc[0] += w_u * w_u + w_v * w_v + c_u * c_u + c_v * c_v;
+    } else {
+        for (int c = 0; c < n; ++c) {
+            acc[c] -= w_u * load_row(zu + c * plane + base, col0, 0, width)
+                    + w_v * load_row(zv + c * plane + base, col0, 0, width);
+            if (u1 > 0) acc[c] += c_u * load_row(zu + c * plane + base - width, col0, 0, width);
+            acc[c] += c_v * load_row(zv + c * plane + base, col0, -1, width);
+        }
+    }
+    for (int c = 0; c < n; ++c) store_row(acc[c], x + c * plane + base, col0, width);
+}
+#else
 __kernel void epi_forward(__global const float *x, __global float *z, __global const float *rays,
                           __global const int *offsets, const int height, const int width, const int channels,
                           const int mix)
@@ -178,12 +247,8 @@ __kernel void epi_adjoint(__global const float *z, __global float *x, __global c
     const int16 cols = lane_columns(col0);
     const float16 t1 = convert_float16(cols / PITCH_V);
     const int16 v_pos = cols % PITCH_V;
-    float16 acc[MAX_CHANNELS];
-    for (int c = 0; c < n; ++c) acc[c] = accumulate ? load_row(x + c * plane + base, col0, 0, width) : (float16)0.0f;
-    // the sample's own rows: -w at itself
-    const float16 w_own = load_row(rays + plane + base, col0, 0, width);
-    const float16 w_u = u1 < PITCH_U - 1 ? w_own : (float16)0.0f;
-    const float16 w_v = select((float16)0.0f, w_own, v_pos < PITCH_V - 1);
+    float16 acc[MAX_CHANNELS], w_u, w_v;
+    adjoint_start(acc, x, rays, plane, base, col0, width, n, accumulate, u1, v_pos, &w_u, &w_v);
     if (squared) {
         acc[0] += w_u * w_u + w_v * w_v;
     } else {
@@ -244,6 +309,8 @@ __kernel void epi_adjoint(__global const float *z, __global float *x, __global c
     }
     for (int c = 0; c < n; ++c) store_row(acc[c], x + c * plane + base, col0, width);
 }
+
+#endif
 
 // --- the x-update of the EPI ADMM (lfcl/solvers/epi.py): the weighted data term, on runs of 16 columns ---
 // `weight_runs` are the U x V data-term weights of one lens (repeating from lens to lens) as common.cl

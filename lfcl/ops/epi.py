@@ -286,7 +286,8 @@ class EpiGradient:
         self.lenses = _lenses_of(planes_shape, (self.U, self.V))
         self.planes_shape = (self.channels, self.height, self.width)
         self.gradient_shape = (2, *self.planes_shape)
-        self._defines = grid_defines((self.U, self.V), 3)
+        self._grid_defines = grid_defines((self.U, self.V), 3)
+        self._defines = self._grid_defines
         self._grid = ((self.width + 15) // 16, self.height)  # runs of 16 columns
         self._rays = self._offsets = None
         self.maps = None  # the host copies (float32) of what was uploaded
@@ -295,6 +296,8 @@ class EpiGradient:
         """Upload the disparity [S, T] (lenses per view step) and the confidence [S, T] in [0, 1] (None: 1):
         per sample, the d and w its ray reads (:func:`ray_maps_np`), and the kernels' offset table."""
         d, w = check_maps(disparity, confidence, self.lenses)
+        # every disparity 0 (the fall-back and in-lens blocks): the kernels built as in-lens stencils (epi.cl)
+        self._defines = self._grid_defines + ((("EPI_IN_LENS", 1),) if not np.any(d) else ())
         self._rays = self.ray_maps(d, w)
         self._offsets = self.runtime.to_device(offset_table(self.lens_tap_spans(self._rays)))
         self.maps = (d, w)
