@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -75,6 +77,34 @@ def _run(cluster, jobs: list, as_json: bool) -> list:
             bar.update(1)
     order = {job["name"]: i for i, job in enumerate(jobs)}
     return sorted(results, key=lambda r: order[r["name"]])
+
+
+def _silence_cluster_logs() -> None:
+    """No more log lines from the client side of the cluster: its shutdown chatter after a Ctrl-C."""
+    for name in ("distributed", "tornado", "asyncio"):
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
+@contextlib.contextmanager
+def _quiet_interrupts():
+    """Ctrl-C while the batch runs: the cluster's logs silenced before the interrupt unwinds. Raised inside
+    distributed's ``sync`` (waiting on a result), the interrupt schedules a cancel on the client's event-loop thread,
+    which can run and log at once. In distributed 2026.8 that cancel can fail with a NameError when the interrupt lands
+    before its future exists. tornado then logged the traceback before this thread reached its ``except``. One CI run
+    in many failed on it (tests/test_batch.py, Ctrl-C)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(*_):
+        _silence_cluster_logs()
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _need_dask():
@@ -184,11 +214,11 @@ def _batch(out_dir, captures, settings, scheduler, workers, resume, as_json):
             click.echo(f"lfcl batch: {_count(len(jobs), 'capture')} on {where}", err=True)
             if cluster.dashboard:
                 click.echo(f"dashboard: {cluster.dashboard}", err=True)
-            results = _run(cluster, jobs, as_json)
+            with _quiet_interrupts():
+                results = _run(cluster, jobs, as_json)
         except KeyboardInterrupt:
             release = scheduler is None  # a remote cluster may still run tasks: leave the lock (--resume)
-            for name in ("distributed", "tornado", "asyncio"):  # the cluster's shutdown chatter after Ctrl-C
-                logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+            _silence_cluster_logs()
             raise
         finally:
             cluster.close()
